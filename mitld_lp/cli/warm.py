@@ -1,7 +1,9 @@
 """The command line's ``warm`` verb: compile, once on a machine, the own PRISM explorer's
 kernels (:mod:`mitld_lp.worlds.prism_explore`), which a PRISM or JANI load uses only
 where their machine code is cached already; until then Storm's explicit builder builds
-every PRISM world (the same tables, slower)."""
+every PRISM world (the same tables, slower).  Also the lifted policy's kernel
+(:mod:`mitld_lp.solvers.lift_kernels`), which a solve uses only where it is cached
+(until then the NumPy search: the same choices)."""
 
 from __future__ import annotations
 
@@ -37,4 +39,22 @@ def cmd_warm(args: argparse.Namespace) -> int:
     if compile_chain_kernels():  # the policy jump's chain solve (seconds, once)
         say_answer(f"compiled the policy jump's chain kernels in "
                    f"{time.process_time() - start:.1f} s of CPU")
+    _warm_lift()
     return EXIT_OK
+
+
+def _warm_lift() -> None:
+    """Compile (or find cached) the lifted policy's kernel; nothing where numba is not
+    installed (the solve then searches with NumPy)."""
+    try:
+        from mitld_lp.solvers import lift_kernels
+    except ImportError:
+        return
+    from mitld_lp.util import kernel_loader
+
+    cached = kernel_loader.cached(lift_kernels.__file__, "first_staying_kernel")
+    start = time.process_time()
+    lift_kernels.warm_up()
+    if not cached:
+        say_answer(f"compiled the lifted policy's kernel in "
+                   f"{time.process_time() - start:.1f} s of CPU")

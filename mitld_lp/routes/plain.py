@@ -112,13 +112,16 @@ class ModelSolution:
 
 
 def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult, s: Settings,
-              deadline: Deadline, after: Quotient | None = None) -> LPResult | None:
+              deadline: Deadline, after: Quotient | None = None, primal: bool = True,
+              ) -> LPResult | None:
     """The occupancy LP of one model (None for method ``"vi"``): it works on the model's
     :class:`Quotient`, made by the one analysis of the product both models share
     (:func:`mitld_lp.solvers.analysis.analyse`), with the bounds of ``it``, its interval
     iteration (both models are iterated in one pass, :func:`_iterate`).  ``after``: the
     next model's quotient, whose LP then reads this one's single-state levels where it
-    shares the matrix (they are built once for both)."""
+    shares the matrix (they are built once for both).  ``primal``: whether its primal
+    point (the policy's flow) is made: the controller's model only (the report reads
+    its primal objective; the bound's model's is NaN)."""
     if s.method != "lp":
         return None
     from mitld_lp.solvers.lp import solve_lp
@@ -130,6 +133,7 @@ def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult, s: Settings,
                     time_limit=deadline.left(), bounds=(it.lower, it.upper),
                     everywhere=quotient.initial < 0, progress=s.progress,
                     flows=False,  # nothing reads a model's occupancy: not at the peak
+                    primal=primal,
                     levels_after=after is not None and after.matrix is quotient.matrix
                     and after.order is quotient.order
                     and after.row_groups is quotient.row_groups)
@@ -391,8 +395,12 @@ def solve_models(mdp: MDP, accept: Acceptance, s: Settings, t0: float,
     if mdp.n_transitions >= TRIM_BEFORE_LP_FROM:
         release_free_memory()
     # (each LP's freed pages handed back before the next stage: _trimmed)
+    # the controller's model (below: the upper one of a minimum's two) alone makes
+    # its LP's primal point, the one primal objective read (report.models_summary)
+    mine = 1 if Sense(sense) is Sense.MIN and len(quotients) == 2 else 0
     lps = [_trimmed(mdp, _solve_lp(mdp, q, it, s, deadline,
-                                   quotients[k + 1] if k + 1 < len(quotients) else None))
+                                   quotients[k + 1] if k + 1 < len(quotients) else None,
+                                   primal=k == mine))
            for k, (q, it) in enumerate(zip(quotients, its, strict=True))]
     # The certificates work on the product: the reduced matrix (a second copy of most
     # transitions) is released before the exact evaluations, where memory peaks.

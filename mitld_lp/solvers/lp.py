@@ -72,6 +72,7 @@ from mitld_lp.solvers.lp_blocks import (
     Answer,
     flow_matrix,
     policy_flow,
+    primal_objective,
     sensed,
     solve_decomposed,
 )
@@ -264,6 +265,7 @@ def solve_lp(
     greedy: bool = True,
     flows: bool = True,
     levels_after: bool = False,
+    primal: bool = True,
 ) -> LPResult:
     """Maximal (``sense=Sense.MIN``: minimal) probability of reaching ``target`` from
     ``mdp.initial``, by the occupancy LP.
@@ -315,12 +317,21 @@ def solve_lp(
         levels_after: another model's LP on a quotient sharing this one's matrix,
             order and row groups comes next: the single states' levels are left for it
             (:func:`~mitld_lp.solvers.lp_blocks.solve_decomposed`); the same answers.
+        primal: ``False``: the primal point (the policy's occupancy, a flow over the
+            quotient's levels) is not made and ``primal_objective`` is NaN (needs
+            ``flows=False``); the values, the policy and the dual objective are the
+            same to the bit.  For the bound's model of a two-model solve
+            (:func:`mitld_lp.routes.plain.solve_models`), whose occupancy and primal
+            objective nothing reads: only the controller's model needs its flow.
 
     An inaccurate Clarabel solve is retried with other settings before it is reported.
     Every failure (missing solver, solver exception, non-optimal termination) comes back
     as a :class:`Status` with the solver's message; nothing is raised for it.
     """
     start = time.perf_counter()
+    if flows and not primal:
+        raise ValueError("solve_lp: flows=True needs primal=True (the occupancy is the "
+                         "primal point)")
     if backend == "auto":
         backend = "direct" if solver.upper() == "CLARABEL" else "cvxpy"
     q = quotient_for(mdp, target, quotient, sense)
@@ -360,9 +371,10 @@ def solve_lp(
         # through the blocks); a quotient of single states whose values and choices
         # the iteration's walk handed over takes them (_from_iteration)
         answer = (bounds is not None and _from_iteration(q, lambda: _start_weights(
-            q, everywhere))) or solve_decomposed(
+            q, everywhere), primal)) or solve_decomposed(
                 q, lambda: _start_weights(q, everywhere), settings,
-                _reduced_bounds(q, bounds), progress, levels_after=levels_after)
+                _reduced_bounds(q, bounds), progress, levels_after=levels_after,
+                primal=primal)
     else:  # the whole LP is built only here
         answer = _solve_monolithic(occupancy_lp(mdp, target, everywhere=everywhere,
                                                 quotient=q), settings)
@@ -370,17 +382,18 @@ def solve_lp(
         return failed(answer)
     taken = [answer]  # _result empties it: the reduced arrays freed once mapped back
     del answer
-    return _result(mdp, q, taken, settings, start, shape, flows)
+    return _result(mdp, q, taken, settings, start, shape, flows, primal)
 
 
-def _from_iteration(q: Quotient, b_eq: Any) -> Answer | None:
+def _from_iteration(q: Quotient, b_eq: Any, primal: bool = True) -> Answer | None:
     """The decomposed LP's answer on a quotient of single states only (a deadline's
     product) whose values walk the interval iteration made in its own pass over the
     levels and handed over (:func:`~mitld_lp.solvers.shared_levels.walk_handing`: the
     LP's walk, the same sums in the same order, the same choices among ties): those
     values and choices, the known zeros' choices and the policy's flow from ``b_eq()``
-    (the primal point) as :func:`~mitld_lp.solvers.lp_blocks.solve_decomposed` makes
-    them; the message says where the values were made.  None (nothing done) where
+    (the primal point, not made where ``primal`` is False) as
+    :func:`~mitld_lp.solvers.lp_blocks.solve_decomposed` makes them; the message says
+    where the values were made.  None (nothing done) where
     nothing was handed over."""
     blk = q.order
     if bool((blk.size > 1).any()) or q.n_states == 0:
@@ -402,12 +415,11 @@ def _from_iteration(q: Quotient, b_eq: Any) -> Answer | None:
     values = walked.values
     del picks, walked, live, states, taken
     b_eq = b_eq()
-    y = policy_flow(q, blk, weights, b_eq, singles, {})
+    y = policy_flow(q, blk, weights, b_eq, singles, {}) if primal else None
     message = (f"0 block LPs and {q.n_states} single states over {blk.n_levels} levels "
                "(their values walk made in the interval iteration's pass)")
     return Answer(Raw(Status.OPTIMAL, message), y, values, reduced_choice,
-                  float(np.einsum("i,i->", q.to_target, y)),
-                  float(np.einsum("i,i->", b_eq, values)), 0)
+                  primal_objective(q, y), float(np.einsum("i,i->", b_eq, values)), 0)
 
 
 def _reduced_bounds(q: Quotient, bounds: tuple[np.ndarray, np.ndarray] | None,
@@ -443,14 +455,18 @@ class OnReduced:
 
 
 def _result(mdp: MDP, q: Quotient, taken: list[Answer], settings: SolveOptions,
-            start: float, shape: tuple[int, int], flows: bool = True) -> LPResult:
+            start: float, shape: tuple[int, int], flows: bool = True,
+            primal_made: bool = True) -> LPResult:
     """The answer of a route mapped back to ``mdp`` (values, policies, occupancy).
     ``taken``: a list holding the answer, emptied here, so that its reduced arrays are
     freed as soon as they are mapped back (not held through the per-choice ones).
-    ``flows``: whether the occupancy and the randomised policy are made
-    (:func:`solve_lp`)."""
+    ``flows``: whether the occupancy and the randomised policy are made, ``primal_made``
+    whether the primal objective is reported (NaN where not: :func:`solve_lp`'s
+    ``primal``; the whole LP's solver makes its point either way)."""
     answer = taken.pop()
     raw, primal, dual, calls = answer.raw, answer.primal, answer.dual, answer.n_solver_calls
+    if not primal_made:
+        primal = float("nan")
     v, reduced_choice, y = answer.v, answer.reduced_choice, answer.y
     del answer
     if not flows:  # the flow (a float a reduced choice) freed before the lifts: they

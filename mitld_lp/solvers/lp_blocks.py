@@ -37,7 +37,8 @@ from mitld_lp.solvers.topological import (
 from mitld_lp.util.progress import tracked
 
 __all__ = ["Answer", "block_lp", "exit_reward", "flow_matrix", "may_be_optimal",
-           "policy_flow", "sensed", "solve_block", "solve_decomposed", "tightened"]
+           "policy_flow", "primal_objective", "sensed", "solve_block", "solve_decomposed",
+           "tightened"]
 
 logger = logging.getLogger(__name__)
 
@@ -57,7 +58,7 @@ class Answer:
     """What a route found, in reduced coordinates, before it is mapped back."""
 
     raw: Raw  # status, message, iterations (y, v unused)
-    y: np.ndarray  # occupancy per reduced choice, from b
+    y: np.ndarray | None  # occupancy per reduced choice, from b (None: not made)
     v: np.ndarray  # value per reduced state (nan where unknown)
     reduced_choice: np.ndarray  # the deterministic policy on the quotient
     primal: float
@@ -388,8 +389,8 @@ def solve_block(block: Block, lp: Matrices, columns: np.ndarray, sense: Sense,
 def solve_decomposed(q: Quotient, b_eq: np.ndarray | Callable[[], np.ndarray],
                       settings: SolveOptions,
                       bounds: tuple[np.ndarray, np.ndarray] | None,
-                      progress: bool | None = None, *, levels_after: bool = False
-                      ) -> Answer | Raw:
+                      progress: bool | None = None, *, levels_after: bool = False,
+                      primal: bool = True) -> Answer | Raw:
     """Level by level (module docs): exact single-state updates, one LP per level of
     non-trivial components, each answer polished by
     :func:`~mitld_lp.solvers.crossover.polish`; the occupancy of the resulting
@@ -428,7 +429,12 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray | Callable[[], np.ndarray],
     follows (the other truncation model's): the single states' levels
     (:func:`~mitld_lp.solvers.shared_levels.shared_levels`) are left kept for it, not
     taken here and built again there (the sensed case's second LP rebuilt them, at its
-    peak)."""
+    peak).
+
+    ``primal=False``: the policy's flow (the primal point) is not made: the answer's
+    ``y`` is None and its ``primal`` NaN, the rest the same to the bit (the bound's
+    model of a two-model solve: nothing reads its occupancy or its primal
+    objective)."""
     blk: Blocks = blocks(q)
     values = np.zeros(q.n_states)
     weights = np.zeros(q.n_choices)
@@ -536,7 +542,8 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray | Callable[[], np.ndarray],
     bounds = level = upd = rest = None  # type: ignore[assignment]
     if callable(b_eq):  # made only now: not held through the levels' peaks
         b_eq = b_eq()
-    y = policy_flow(q, blk, weights, b_eq, singles, walks)
+    y = policy_flow(q, blk, weights, b_eq, singles, walks) if primal else None
+    del weights, walks
     message = (f"{calls} block LPs and {q.n_states - int(np.sum(blk.size[blk.size > 1]))} "
                f"single states over {blk.n_levels} levels"
                + (f" ({n_kept} of {n_columns} block columns may be optimal by the bounds)"
@@ -554,5 +561,11 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray | Callable[[], np.ndarray],
     # zeroconf_dl on a loaded machine, where the sum is 0.05 ms; the report's figures
     # only, which may move in their last bits)
     return Answer(Raw(worst.status, message, iterations=iterations), y, values,
-                   reduced_choice, float(np.einsum("i,i->", q.to_target, y)),
+                   reduced_choice, primal_objective(q, y),
                    float(np.einsum("i,i->", b_eq, values)), calls)
+
+
+def primal_objective(q: Quotient, y: np.ndarray | None) -> float:
+    """The flow ``y``'s reward ``sum_c y(c) P_hat(c, target)``, NaN where no flow was made
+    (``primal=False``: :func:`solve_decomposed`)."""
+    return float("nan") if y is None else float(np.einsum("i,i->", q.to_target, y))

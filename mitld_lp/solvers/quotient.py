@@ -34,6 +34,7 @@ from mitld_lp.solvers.graph import (
 from mitld_lp.solvers.reduced import Qualitative, Quotient, greedy_choices
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rows import first_choice_without, gather_ranges, row_entries
+from mitld_lp.util import kernel_loader
 from mitld_lp.util.arrays import SLICE_STATES, index_dtype
 
 __all__ = [
@@ -225,10 +226,34 @@ def first_staying(mdp: MDP, inside: np.ndarray, lo: int = 0, hi: int | None = No
 def staying_choices(mdp: MDP, inside: np.ndarray, states: np.ndarray) -> np.ndarray:
     """:func:`first_staying` of the ``states`` (increasing), int64: the first choice
     with no entry of positive probability outside (a stored zero is no edge), read a
-    chunk of entries at a time (:func:`~mitld_lp.solvers.rows.first_choice_without`)."""
+    chunk of entries at a time (:func:`~mitld_lp.solvers.rows.first_choice_without`),
+    or a state at a time compiled where :func:`lift_compiled` says so (the same
+    integers)."""
+    if lift_compiled(states.size):
+        from mitld_lp.solvers.lift_kernels import first_staying
+
+        return first_staying(mdp.row_groups, mdp.matrix, inside, states)
     m = mdp.matrix
     return first_choice_without(mdp.row_groups, m, states,
                                 lambda e: ~inside[m.indices[e]] & (m.data[e] > 0))
+
+
+LIFT_KERNEL_MIN_STATES = 1024
+"""The fewest states :func:`staying_choices` searches compiled
+(:mod:`mitld_lp.solvers.lift_kernels`), once the kernels' load is paid and its machine
+code is cached (``mitld-lp warm``): never a compile in a solve."""
+
+_LIFT_WARM: list[bool] = []  # whether the lift's kernel is cached, looked up once
+
+
+def lift_compiled(n_states: int) -> bool:
+    """Whether :func:`staying_choices` of ``n_states`` states runs compiled."""
+    if n_states < LIFT_KERNEL_MIN_STATES or not kernel_loader.compiled_paid():
+        return False
+    if not _LIFT_WARM:
+        _LIFT_WARM.append(kernel_loader.module_cached("mitld_lp.solvers.lift_kernels",
+                                                      "first_staying_kernel"))
+    return _LIFT_WARM[0]
 
 
 def _recorded(quotient: Quotient, sure: np.ndarray) -> SureStrategy | None:

@@ -60,7 +60,9 @@ class LPResult:
             states the optimal occupancy visits; elsewhere an upper bound (any dual
             feasible vector is), unless the LP was solved with ``everywhere=True``.
             ``None`` without a solution.
-        primal_objective: ``sum_c y(c) P(c, target)`` at the returned occupancy.
+        primal_objective: ``sum_c y(c) P(c, target)`` at the returned occupancy;
+            ``nan`` without a solution and where the occupancy was not made
+            (``solve_lp(..., primal=False)``: a two-model solve's bound model).
         dual_objective: ``sum_s b(s) v(s)`` at the returned duals.
         occupancy: ``(n_choices,)`` expected number of times each original choice is
             taken (0 for choices not in the LP: MEC-internal, target, prob-0).
