@@ -41,7 +41,7 @@ from mitld_lp.worlds.prism_expr import (
     substitute,
     variable,
 )
-from mitld_lp.worlds.prism_parse import Parsed
+from mitld_lp.worlds.prism_parse import Module, Parsed
 
 __all__ = ["Declined", "Program", "front_program", "resolve"]
 
@@ -241,6 +241,21 @@ def _all_variables(program: Program) -> list[_Var]:
     return out
 
 
+def module_scope(parsed: Parsed, m: Module, scope: dict[str, Expr]) -> dict[str, Expr]:
+    """The names as module ``m`` reads them: a renamed module's base's names renamed, and
+    the formulas expanded under the renaming (``lfree`` of ``phil2`` reads ``p3``)."""
+    if not m.renamed:
+        return scope
+    inner = dict(scope)
+    for old, new in m.renaming.items():
+        if new in scope:
+            inner[old] = scope[new]
+    for name, raw in parsed.formulas:
+        if name not in m.renaming:
+            inner[name] = simplify(resolve(raw, inner))
+    return inner
+
+
 def _declare(program: Program, parsed: Parsed, scope: dict[str, Expr]) -> None:
     def made(name: str, bounds: Any, raw_init: Any) -> tuple[_Var, bool]:
         if bounds is None:
@@ -257,8 +272,10 @@ def _declare(program: Program, parsed: Parsed, scope: dict[str, Expr]) -> None:
         var, boolean = made(name, bounds, init)
         (program.global_boolean_variables if boolean else
          program.global_integer_variables).append(var)
+    outer = scope
     for m in parsed.modules:
         module = _Module(m.name)
+        scope = module_scope(parsed, m, outer)
         for name, bounds, init in m.variables:
             var, boolean = made(name, bounds, init)
             (module.boolean_variables if boolean else module.integer_variables).append(var)
@@ -282,7 +299,9 @@ def _commands(program: Program, parsed: Parsed, scope: dict[str, Expr],
     program.actions = list(index)
     kept: set[str] = set()
     k = 0
+    outer = scope
     for j, (m, module) in enumerate(zip(parsed.modules, program.modules, strict=True)):
+        scope = module_scope(parsed, m, outer)
         for action, raw_guard, raw_updates in m.commands:
             k += 1
             guard = simplify(_typed(resolve(raw_guard, scope), BOOL, "a guard"))
@@ -298,7 +317,7 @@ def _commands(program: Program, parsed: Parsed, scope: dict[str, Expr],
                     if owner[name] == -1 and action:
                         raise Declined(f"global {name} assigned by a command with an action")
                     seen.add(name)
-                    e = simplify(_typed(resolve(raw, scope), scope[name].type,
+                    e = simplify(_typed(resolve(raw, scope), outer[name].type,
                                         f"an assignment to {name}"))
                     if not (e.op == "VAR" and e.value == name):  # Storm drops x'=x
                         assignments.append(_Assignment(name, e))

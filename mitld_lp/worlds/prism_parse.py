@@ -64,6 +64,7 @@ class Module:
         default_factory=list)
     renamed: bool = False
     base: str = ""  # the module a renamed one copies
+    renaming: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -293,14 +294,6 @@ def _command(t: _Tokens) -> tuple[str, Any, list[tuple[Any, list[tuple[str, Any]
     return action, guard, updates
 
 
-def _rename(e: Any, names: dict[str, str]) -> Any:
-    if isinstance(e, tuple):
-        if e[0] == "id":
-            return ("id", names.get(e[1], e[1]), e[2])
-        return tuple(_rename(x, names) for x in e)
-    return e
-
-
 def _module(t: _Tokens, out: Parsed) -> Module:
     name = t.name()
     if t.accept("="):
@@ -318,17 +311,14 @@ def _module(t: _Tokens, out: Parsed) -> Module:
                 break
         t.expect("]")
         t.expect("endmodule")
-        own = {v[0] for m in out.modules for v in m.variables} | {
-            v[0] for v in out.globals} | {c[0] for c in base.commands}
-        if not set(names) <= own or len(set(names.values())) != len(names):
-            raise Outside(f"module {name}: a renaming of other names than variables and "
-                          "actions")
-        module = Module(name, renamed=True, base=base_name)
-        module.variables = [(names.get(v), _rename(b, names), _rename(i, names))
-                            for v, b, i in base.variables]
-        module.commands = [(names.get(a, a), _rename(g, names),
-                            [(_rename(p, names), [(names.get(x, x), _rename(e, names))
-                                                  for x, e in asg]) for p, asg in ups])
+        if len(set(names.values())) != len(names):
+            raise Outside(f"module {name}: two names renamed to one")
+        module = Module(name, renamed=True, base=base_name, renaming=names)
+        # the expressions stay the base's, read with the renaming (and the formulas
+        # expanded under it) by prism_front
+        module.variables = [(names.get(v), b, i) for v, b, i in base.variables]
+        module.commands = [(names.get(a, a), g, [(p, [(names.get(x, x), e) for x, e in asg])
+                                                 for p, asg in ups])
                            for a, g, ups in base.commands]
         if any(v[0] is None for v in module.variables):
             raise Outside(f"module {name}: a variable of {base_name} not renamed")
