@@ -1,4 +1,5 @@
-"""A PRISM MDP as a :class:`mitld_lp.worlds.game.Game`, built by Storm through stormpy.
+"""A PRISM MDP as a :class:`mitld_lp.worlds.game.Game`, parsed by the own parser
+(:mod:`mitld_lp.worlds.prism_own`, no stormpy) where it takes the file, else by Storm.
 
 ``load_prism("robot.prism", constants={"N": 4}, events=("opened",))`` parses the file,
 gives its undefined constants their values, checks the program, builds the MDP's
@@ -109,7 +110,7 @@ from mitld_lp.worlds.prism_build import (
 )
 from mitld_lp.worlds.prism_depth import ExpressionDepth, check_text
 from mitld_lp.worlds.prism_exact import PrismRecipe, exact_probabilities
-from mitld_lp.worlds.prism_names import DeferredNames
+from mitld_lp.worlds.prism_names import DeferredNames, command_names
 from mitld_lp.worlds.prism_own import own_load
 from mitld_lp.worlds.prism_program import (
     check_constants,
@@ -566,7 +567,7 @@ def load_prism(
     common = _common(where, tables, chosen, terminal, recipe, str(bound), event_set)
     return LazyPrismGame(**common, grow=grower, limit=first,  # type: ignore[arg-type]
                          max_states=max_states,
-                         program_actions=frozenset(_names(program)) - event_set)
+                         program_actions=command_names(program) - event_set)
 
 
 def _common(where: str, tables: Tables, chosen: frozenset[str], terminal: str,
@@ -581,9 +582,8 @@ def _common(where: str, tables: Tables, chosen: frozenset[str], terminal: str,
                 normalised=tables.normalised, _tables=tables, recipe=recipe)
 
 
-def _game(where: str, tables: Tables, chosen: frozenset[str], terminal: str,
-          recipe: PrismRecipe, bound: str, events: frozenset[str]) -> PrismGame:
-    return PrismGame(**_common(where, tables, chosen, terminal, recipe, bound, events))
+def _game(*args: Any) -> PrismGame:
+    return PrismGame(**_common(*args))
 
 
 def _an_mdp(program: Any, where: str) -> None:
@@ -598,11 +598,3 @@ def _labelled(program: Any) -> set[str]:
     """The actions of the program's commands."""
     return {cmd.action_name for module in program.modules for cmd in module.commands
             if cmd.is_labeled}
-
-
-def _names(program: Any) -> set[str]:
-    """The names of the program's commands: their actions, ``<module>_cmd<k>`` for a
-    command without one (the module docstring)."""
-    return {cmd.action_name if cmd.is_labeled else f"{module.name}_cmd{k}"
-            for module in program.modules
-            for k, cmd in enumerate(module.commands, start=1)}
