@@ -27,7 +27,7 @@ from mitld_lp.logic.fragment import horizon
 from mitld_lp.logic.syntax import Formula
 from mitld_lp.worlds import WorldError
 from mitld_lp.worlds.prism_depth import ExpressionDepth
-from mitld_lp.worlds.prism_expr import Expr
+from mitld_lp.worlds.prism_expr import Expr, PrismTypeError
 from mitld_lp.worlds.prism_front import Declined, Program, front_program, resolve
 from mitld_lp.worlds.prism_parse import Outside, PrismSyntaxError, parse, parse_expression
 from mitld_lp.worlds.prism_program import SizeBound, check_program
@@ -112,7 +112,8 @@ def own_load(text: str, where: str, depth: ExpressionDepth, *, constants: Mappin
         tables, reason = prism_explore.explore_tables(
             None, program, where, chosen, frozenset(), terminal, max_states,
             condition=_condition(program, terminal))
-    except (Declined, Outside, PrismSyntaxError, WorldError) as exc:
+    except (Declined, Outside, PrismSyntaxError, PrismTypeError, WorldError, RecursionError,
+            ZeroDivisionError, OverflowError, ValueError) as exc:  # Storm's route words it
         log.debug("%s: read by Storm, not the own parser: %s", where, exc)
         return None
     if tables is None:
