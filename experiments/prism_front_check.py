@@ -55,7 +55,8 @@ def instances(qvbs: Path, max_states: int, only: list[str]) -> list[tuple[str, P
             if not states or states[0] > max_states:
                 continue
             given = {k: v for k, v in values.items() if k in open_}
-            name = f"{e.folder.name}.{'-'.join(str(v).lower() for v in given.values())}"
+            values_ = "-".join(str(v).lower() for v in given.values())
+            name = f"{path.stem}.{values_}" if values_ else path.stem
             if name not in {x[0] for x in out}:
                 out.append((name, path, given))
     return out
