@@ -133,7 +133,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--only", nargs="*", default=[])
     ap.add_argument("--max-states", type=int, default=300_000)
-    ap.add_argument("--out", type=Path, default=Path("experiments/out/prism_front_check"))
+    ap.add_argument("--out", type=Path,
+                    default=Path(__file__).resolve().parent / "out" / "quick" / "prism_front")
     args = ap.parse_args(argv)
     limit = 20_000 if args.quick else args.max_states
     rows, different, taken = [], 0, 0
