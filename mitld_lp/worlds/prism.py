@@ -1,4 +1,5 @@
-"""A PRISM MDP as a :class:`mitld_lp.worlds.game.Game`, built by Storm through stormpy.
+"""A PRISM MDP as a :class:`mitld_lp.worlds.game.Game`, parsed by the own parser
+(:mod:`mitld_lp.worlds.prism_own`, no stormpy) where it takes the file, else by Storm.
 
 ``load_prism("robot.prism", constants={"N": 4}, events=("opened",))`` parses the file,
 gives its undefined constants their values, checks the program, builds the MDP's
@@ -109,7 +110,8 @@ from mitld_lp.worlds.prism_build import (
 )
 from mitld_lp.worlds.prism_depth import ExpressionDepth, check_text
 from mitld_lp.worlds.prism_exact import PrismRecipe, exact_probabilities
-from mitld_lp.worlds.prism_names import DeferredNames
+from mitld_lp.worlds.prism_names import DeferredNames, command_names
+from mitld_lp.worlds.prism_own import own_load
 from mitld_lp.worlds.prism_program import (
     check_constants,
     check_program,
@@ -494,6 +496,14 @@ def load_prism(
         raise WorldError(f"{where}: JANI files are not supported here: load_jani reads them")
     depth = ExpressionDepth()
     check_text(p, where, depth)  # before Storm's parser, which can crash on it
+    owned = own_load(p.read_text(encoding="utf-8"), where, depth, constants=dict(
+        constants or {}), labels=labels, events=frozenset([events] if isinstance(
+            events, str) else events), max_states=max_states, memory=memory,
+        define=dict(define or {}), task=task, explore=explore)
+    if owned is not None:  # no stormpy: the own parser and explorer (prism_own)
+        return _game(where, owned.tables, owned.chosen, owned.terminal, PrismRecipe(
+            str(p.resolve()), where, dict(constants or {}), dict(define or {}),
+            owned.terminal), f"{owned.bound}, parsed without Storm", frozenset())
     stormpy = stormpy_module()
     program = labelled_program(stormpy, p, where, dict(define or {}), where, depth,
                                lambda program: _an_mdp(program, where))
@@ -552,29 +562,28 @@ def load_prism(
         tables = (None if fits or event_set else own_build(  # the own explorer, else Storm
             stormpy, plain, where, chosen, terminal, max_states, memory)) or build_within(
             lambda: work(None, own=fits), where, fits, str(bound), max_states, memory)
-    log.info(
-        "%s: %d states explored (%s), %d not expanded (task decided: %s), labels %s, events %s%s",
-        where, len(tables.states), bound, tables.decided, terminal or "never",
-        sorted(chosen), sorted(event_set), cold_note(),
-    )
-    common = dict(
-        source=where,
-        variables=tables.variables,
-        states=tables.states,
-        initial=tables.states[tables.initial],
-        proposition_names=chosen,
-        effects=tables.effects,
-        terminal=terminal,
-        decided=tables.decided,
-        normalised=tables.normalised,
-        _tables=tables,
-        recipe=recipe,
-    )
     if tables.unexplored is None:
-        return PrismGame(**common)  # type: ignore[arg-type]
+        return _game(where, tables, chosen, terminal, recipe, str(bound), event_set)
+    common = _common(where, tables, chosen, terminal, recipe, str(bound), event_set)
     return LazyPrismGame(**common, grow=grower, limit=first,  # type: ignore[arg-type]
                          max_states=max_states,
-                         program_actions=frozenset(_names(program)) - event_set)
+                         program_actions=command_names(program) - event_set)
+
+
+def _common(where: str, tables: Tables, chosen: frozenset[str], terminal: str,
+            recipe: PrismRecipe, bound: str, events: frozenset[str]) -> dict[str, Any]:
+    """The fields of a loaded game (its load logged)."""
+    log.info("%s: %d states explored (%s), %d not expanded (task decided: %s), labels %s, "
+             "events %s%s", where, len(tables.states), bound, tables.decided,
+             terminal or "never", sorted(chosen), sorted(events), cold_note())
+    return dict(source=where, variables=tables.variables, states=tables.states,
+                initial=tables.states[tables.initial], proposition_names=chosen,
+                effects=tables.effects, terminal=terminal, decided=tables.decided,
+                normalised=tables.normalised, _tables=tables, recipe=recipe)
+
+
+def _game(*args: Any) -> PrismGame:
+    return PrismGame(**_common(*args))
 
 
 def _an_mdp(program: Any, where: str) -> None:
@@ -589,11 +598,3 @@ def _labelled(program: Any) -> set[str]:
     """The actions of the program's commands."""
     return {cmd.action_name for module in program.modules for cmd in module.commands
             if cmd.is_labeled}
-
-
-def _names(program: Any) -> set[str]:
-    """The names of the program's commands: their actions, ``<module>_cmd<k>`` for a
-    command without one (the module docstring)."""
-    return {cmd.action_name if cmd.is_labeled else f"{module.name}_cmd{k}"
-            for module in program.modules
-            for k, cmd in enumerate(module.commands, start=1)}

@@ -370,14 +370,16 @@ def label_values(built: Explored, exprs: list[int]) -> np.ndarray:
 
 def explore_tables(stormpy: Any, plain: Any, where: str, chosen: frozenset[str],
                    events: frozenset[str], terminal: str, max_states: int,
-                   ) -> tuple[Tables | None, str]:
+                   condition: Any = None) -> tuple[Tables | None, str]:
     """The own build of ``plain`` (the program with its constants) as :class:`Tables`,
     as :func:`~mitld_lp.worlds.prism_build.build_tables` would read Storm's; or
-    ``(None, reason)`` where it declines (the module docstring)."""
+    ``(None, reason)`` where it declines (the module docstring).  Without ``stormpy``
+    (the own parse's program), ``condition`` is ``terminal`` as an expression."""
     if events:
         return None, "event effects"
     try:
-        compiled = compile_program(plain, terminal_expression(stormpy, plain, terminal))
+        compiled = compile_program(plain, condition if stormpy is None else
+                                   terminal_expression(stormpy, plain, terminal))
     except Unsupported as exc:
         return None, str(exc)
     built = explore_program(compiled, max_states)  # past it: Storm's build says so
