@@ -24,6 +24,85 @@ import _common  # noqa: E402
 
 QUICK_FAMILIES = ("csma", "consensus", "zeroconf")
 
+#: A small program for the hand-written properties (every form the reader covers, and
+#: forms it declines or Storm refuses).
+MODEL = """mdp
+const int N;
+const int M = 3;
+const int M2 = M*2;
+const double p = 0.5;
+const bool b = true;
+formula near = x > M2-2;
+formula nearer = near & x < N;
+formula odd = mod(x, 2) = 1;
+module m
+  x : [0..10] init 0;
+  y : bool init false;
+  [a] x < 10 -> p : (x'=x+1) + (1-p) : (y'=!y);
+endmodule
+label "goal" = x = 10;
+label "two" = x=2 | y;
+label "under_score" = y;
+rewards "r" true : 1; endrewards
+"""
+
+CASES = [
+    'Pmax=? [F "goal"]', 'Pmin=? [ F x=3 & y ]', 'P>=0.5 [ F<=M "goal" ]',
+    'P>1/2 [ G !"two" ]', 'Pmax=? [ X x=1 ]', 'Pmax=? [ !"two" U x>=3 ]',
+    'Pmax=? [ "two" U<=5 "goal" ]', 'Pmax=? [ F[2,N] "goal" ]', 'Pmax=? [ F<M+1 x=2 => y ]',
+    'Pmax=? [F near]', 'Pmax=? [F nearer]', 'Pmax=? [F odd]', 'Pmax=? [F x+1 = 2*3 - (x/2)]',
+    'Pmax=? [F (x=1|x=2)&!y]', 'filter(max, Pmax=? [F "goal"], "init")',
+    'filter(min, Pmax=? [F y], "init")', 'filter(values, Pmax=? [F y], "init")',
+    'filter(max, Pmax=? [F y], y)', 'filter(forall, P>=1 [F "goal"])',
+    'Pmax=? [F "goal" | y]', 'Pmax=? [F !(x<=3)]', 'Pmax=? [F x!=3]', 'Pmax=? [F b]',
+    'Pmax=? [F p > 0.3]', 'Pmax=? [F y <=> b]', 'Pmax=? [ F x=1 U y]', 'Pmax=? [F true]',
+    'Pmax=? [F false]', 'Pmax=? [F "init"]', 'Pmax=? [F "deadlock"]', 'Pmax=? [F "nope"]',
+    'Pmax=? [ F x = min(3,x)]', 'Pmax=? [F x = floor(2.5)]', 'Pmax=? [F y ? x=1 : x=2]',
+    'Pmax=? [G<=3 y]', 'Pmax=? [ F>=3 y]', 'Pmax=? [F<=2.5 y]', 'P<=0.3 [F y]',
+    'Pmax>=0.2 [F y]', 'Pmin<0.2 [F y]', 'P=? [F y]', 'Pmax=? [F (F y)]', 'Pmax=? [F y & F x=1]',
+    'Pmax=? [F x=-1]', 'Pmax=? [F x = 1-2-3]', 'Pmax=? [F x = 12/4/3]', 'Pmax=?[F x^2=4]',
+    'Pmax=? [F x mod 2 = 0]', 'Pmax=? [F !y]', 'Pmax=? [F x=1 & "goal"]',
+    'Pmax=? [F "goal" & x=1 & y]', 'Pmax=? [F y & x=1 & "goal"]', 'Pmax=? [F !"goal"]',
+    'Pmax=? [F !!"goal"]', 'Pmax=? [F !(x=1 & "goal")]', 'Pmax=? [F ("goal")]',
+    'Pmax=? [F ((x=1))]', 'Pmax=? [F true & y]', 'Pmax=? [F "goal" => y]',
+    'Pmax=? [F x=1.0]', 'Pmax=? [F x=N]', 'Pmax=? [ y U<=3 x=1]', 'Pmax=? [ y U[1,3] x=1]',
+    'Pmax=? [ F<3 x=1]', 'Pmax=? [ F<1 x=1]', 'Pmax=? [ F<0 x=1]', 'Pmax=? [F x = 1e2]',
+    'Pmax=? [F "goal" | "two" & y]', 'Pmax=? [F y | x=1 & "goal"]',
+    'Pmax=? [F x=1 | y => "goal"]', 'Pmax=? [F !y U x=1]', 'Pmax=? [F y] // c',
+    'Pmax=? [F x=2 = y]', 'Pmax=? [F x<3=y]', 'Pmax=? [X X y]', 'Pmax=? [F b & y]',
+    'Pmax=? [F x=M2]', 'Pmax=? [F x=1 | y => x=2]', 'Pmax=? [F y => x=2 | x=1]',
+    'Pmax=? [F y & y | y]', 'Pmax=? [F y | y & y]', 'Pmax=? [F !y & y]',
+    'Pmax=? [F x+2*3-1 > 0]', 'Pmax=? [F -x < 0]', 'Pmax=? [F x = 2-(-1)]', 'Pmax=? [F zz]',
+    'const int K;\n"a": Pmax=? [F x=K];\n"b": Pmin=? [F<=K y]',
+    'const int K=2; Pmax=? [F x=K]; Pmax=? [F "goal"]', 'const int J; Pmax=? [F x=J]',
+    '"a": Pmax=? [F y];\n"a": Pmin=? [F y]', 'Pmax=? [F x/2 = 1]', 'Pmax=? [F x*p = 1]',
+    'Pmax=? [F y = true]', 'Pmax=? [(y) U (x=1)]', 'Pmax=? [F (y & "goal")]',
+    'Pmax=? [F ("goal" & y) | y]', 'Pmax=? [ y U "goal" ]', 'Pmax=? [F (x=1)=y]',
+    'Pmax=? [F 0.5 < p]', 'Pmax=? [F x = 0.25*4]', 'Pmax=? [ F<=0 y]', 'Pmax=? [ F[3,1] y]',
+    'P>=0.9 [F y]', 'P>=1 [F y]', 'P<0 [F y]', 'P>=2 [F y]', 'P>=M/6 [F y]', 'P>N [F y]',
+    'P>=p [F y]', 'Pmax=? [ F "goal" ]; Pmin=? [ G y ]', 'Pmax=? [ F "goal" ]\nPmin=? [ G y ]',
+    'Pmax=? [F x=1 & y | x=2]', 'Pmax=? [F y | x=1 & x=2]', 'Pmax=? [F x=1 => y & y]',
+    'Pmax=? [F 3 = x]', 'Pmax=? [F x > 2.5]', 'Pmax=? [F x - 1 > 2 + -1]',
+    'Pmax=? [F (x)=1]', 'Pmax=? [F "goal" | !y]', 'Pmax=? [F !y | "goal"]',
+    'Pmax=? [F !(y) | "goal"]', 'Pmax=? [F !(y | "goal")]', 'Pmax=? [F !(y | x=1)]',
+    'Pmax=?[F(y)]', 'Pmax=? [ F<=M2 y]', 'Pmax=? [ F<=N y]', 'Pmax=? [ F<=1.5 y]',
+    'Pmax=? [ F [ 1 , 2 ] y]', 'Pmax=? [ y U[0,M] x=1]', 'Pmin=? [ X "goal"]',
+    'Pmax=? [ X !y]', 'Pmax=? [ G x<3 ]', 'Pmax=? [G "goal" & y]', 'Pmax=? [G !"goal" & y]',
+    'Pmax=? [ !"goal" U<=3 !y]', 'Pmax=? [ "goal" & y U<=3 "goal"]', 'Pmax=? [F<=3 !"goal"]',
+    'Pmax=? [F<=3 "goal" & y]', 'Pmax=? [X !"goal"]', 'Pmax=? [X "goal" | y]',
+    'Pmax=? [F !(!"goal")]', 'Pmax=? [ y ]', 'Pmax=? [ "goal" ]', 'Pmax=? [F x]',
+    'Pmax=? [F<=y "goal"]', 'Pmax=? [F "under_score"]', 'Pmax=? [F<=N+1 "goal"]',
+    'R{"r"}min=? [F "goal"]', 'Rmin=? [F "goal"]', 'Tmin=? [F "goal"]', 'S=? ["goal"]',
+    'Pmax=? [F{"r"}<=3 "goal"]', 'Pmax=? [F^{rew{"r"}<=3} "goal"]', 'multi(Pmax=? [F y], '
+    'Pmax=? [F "goal"])', 'Pmax=? [F "goal" & F y]', 'Pmax=? [F Pmax>=1 [F y]]',
+    'Pmax=? [y W "goal"]', 'Pmax=? [F "goal"', 'Pmax=? [F ]', 'Pmax=?', '', '// only',
+    'P>=1 [F y]; R{"r"}min=? [F "goal"]', '/* c */ Pmax=? [F y]', 'Pmax=? [F y];;',
+    'Pmax=? [F x=1 U<=2 y]', 'Pmax=? [F (x=1) U<=2 y]', 'Pmax=? [F y]\n\nPmin=? [F y]',
+    'Pmax=? [F x=1.5e0 | y]', 'Pmax=? [F x >= -(2)]', 'Pmax=? [F !true]',
+    'Pmax=? [F (true)]', 'Pmax=? [F x = .5]', 'const double K; Pmax=? [F x*K=1]',
+    'const bool K; Pmax=? [F K]', 'const K = 2; Pmax=? [F x=K]', 'const int x = 2; Pmax=? [F y]',
+]
+
 
 def outcome(program: Any, text: str, constants: dict[str, Any], own: bool) -> list[Any]:
     """What the door makes of ``text``: per property its name and posed task, or that
@@ -122,6 +201,20 @@ def split(text: str) -> tuple[list[str], list[str]]:
     return consts, props
 
 
+def hand_cases(out: Path) -> list[tuple[str, str]]:
+    """``(case, kind)`` of every hand-written case (``DIFFERENT`` ones printed)."""
+    model = out / "property_reader_model.prism"
+    model.write_text(MODEL)
+    rows = []
+    for case in CASES:
+        given = {"N": 4} if "const" not in case else {"K": 2}
+        kind, detail = compare(model, case, given)
+        rows.append((case.replace("\n", " / "), kind))
+        if detail:
+            print(f"{case!r}: DIFFERENT\n    {detail}")
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = _common.parser(__doc__.splitlines()[0])
     ap.add_argument("--qvbs", type=Path, required=True, help="the QVBS benchmarks folder")
@@ -129,6 +222,9 @@ def main(argv: list[str] | None = None) -> int:
     out = _common.out_dir(args)
     counts = {"own": 0, "declined": 0, "DIFFERENT": 0}
     rows = []
+    for case, kind in hand_cases(out):
+        counts[kind] += 1
+        rows.append(("hand-written", "", case[:70], kind))
     for family, model, props_file, values in families(args.qvbs, args.quick):
         text = props_file.read_text()
         consts, props = split(text)
