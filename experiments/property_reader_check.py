@@ -4,8 +4,10 @@ objective, comparison, threshold) or the same refusal, or declined to Storm's re
 
     python experiments/property_reader_check.py --qvbs <QVBS>          # every family
     python experiments/property_reader_check.py --qvbs <QVBS> --quick  # three families
+    python experiments/property_reader_check.py --quick                # hand-written only
 
-Each properties file is read whole, then each of its properties alone (with the file's
+First the hand-written properties (``CASES``, on the program ``MODEL``), then each
+QVBS properties file is read whole, then each of its properties alone (with the file's
 ``const`` lines), for the first model file of the family and the constants of its
 first instance in ``index.json``.  Prints one line per difference and the counts;
 writes ``property_reader_check.md`` into the output folder.
@@ -217,7 +219,8 @@ def hand_cases(out: Path) -> list[tuple[str, str]]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = _common.parser(__doc__.splitlines()[0])
-    ap.add_argument("--qvbs", type=Path, required=True, help="the QVBS benchmarks folder")
+    ap.add_argument("--qvbs", type=Path, default=None,
+                    help="the QVBS benchmarks folder (without it: the hand-written cases)")
     args = ap.parse_args(argv)
     out = _common.out_dir(args)
     counts = {"own": 0, "declined": 0, "DIFFERENT": 0}
@@ -225,7 +228,8 @@ def main(argv: list[str] | None = None) -> int:
     for case, kind in hand_cases(out):
         counts[kind] += 1
         rows.append(("hand-written", "", case[:70], kind))
-    for family, model, props_file, values in families(args.qvbs, args.quick):
+    qvbs = families(args.qvbs, args.quick) if args.qvbs is not None else []
+    for family, model, props_file, values in qvbs:
         text = props_file.read_text()
         consts, props = split(text)
         from mitld_lp.worlds.properties import read_program

@@ -83,7 +83,8 @@ _TOKEN = re.compile(r"""
 """, re.VERBOSE)
 
 _KEYWORDS = {"F", "G", "X", "U", "W", "R", "S", "T", "LRA", "P", "E", "A", "C", "I",
-             "multi", "filter", "const", "formula", "label", "true", "false"}
+             "multi", "filter", "const", "formula", "label", "true", "false", "Pmax",
+             "Pmin", "Rmax", "Rmin", "Tmax", "Tmin", "Smax", "Smin", "LRAmax", "LRAmin"}
 
 
 def _tokens(text: str, where: str) -> list[tuple[str, str, int, int]]:
@@ -262,6 +263,8 @@ class _Parser:
             if inner[0] in ("F", "G", "X", "U"):
                 raise Decline("a temporal operator in parentheses")
             return inner
+        if kind in ("op", "end") and value not in ("{", "^", "?", "%", "<=>"):
+            raise self.error("a state formula")
         raise Decline(f"{value!r} where a state formula belongs")
 
     # ------------------------------------------------------------ path formulas
