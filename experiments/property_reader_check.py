@@ -34,6 +34,9 @@ const int M = 3;
 const int M2 = M*2;
 const double p = 0.5;
 const bool b = true;
+const int D = N*2;
+const double q;
+const double r = q/2;
 formula near = x > M2-2;
 formula nearer = near & x < N;
 formula odd = mod(x, 2) = 1;
@@ -103,6 +106,8 @@ CASES = [
     'Pmax=? [F x=1.5e0 | y]', 'Pmax=? [F x >= -(2)]', 'Pmax=? [F !true]',
     'Pmax=? [F (true)]', 'Pmax=? [F x = .5]', 'const double K; Pmax=? [F x*K=1]',
     'const bool K; Pmax=? [F K]', 'const K = 2; Pmax=? [F x=K]', 'const int x = 2; Pmax=? [F y]',
+    'Pmax=? [F x=D]', 'Pmax=? [F x*q < 1]', 'Pmax=? [F x*r < 1]', 'P>=q [F y]',
+    'Pmax=? [F<=D y]', 'const double h; Pmax=? [F x*h < 1]',
 ]
 
 
@@ -209,7 +214,9 @@ def hand_cases(out: Path) -> list[tuple[str, str]]:
     model.write_text(MODEL)
     rows = []
     for case in CASES:
-        given = {"N": 4} if "const" not in case else {"K": 2}
+        from mitld_lp.worlds.properties import parse_constants
+
+        given = parse_constants("N=4,q=0.25,K=2,h=0.5")
         kind, detail = compare(model, case, given)
         rows.append((case.replace("\n", " / "), kind))
         if detail:
