@@ -255,8 +255,9 @@ def main(argv: list[str] | None = None) -> int:
     print(_common.text_table(header, rows))
     print(f"own {counts['own']}, declined {counts['declined']}, different "
           f"{counts['DIFFERENT']}")
+    escaped = [[str(c).replace("|", "\\|") for c in row] for row in rows]
     _common.write_text(out / "property_reader_check.md",
-                       _common.markdown_table(header, rows) +
+                       _common.markdown_table(header, escaped) +
                        f"\nown {counts['own']}, declined {counts['declined']}, "
                        f"different {counts['DIFFERENT']}\n")
     return 1 if counts["DIFFERENT"] else 0
