@@ -182,15 +182,18 @@ class _Parser:
     def unary(self) -> tuple:
         kind, value, line, col = self.peek()
         if kind == "op" and value in ("!", "-"):
-            saved = self.i
-            self.i += 1
-            try:
-                operand = self.unary()
-            except _NoExpression:
-                self.i = saved
-                raise
-            return ("not" if value == "!" else "neg", operand)
+            return ("not" if value == "!" else "neg", self.past_one(self.unary))
         return self.atom()
+
+    def past_one(self, parse: Any) -> tuple:
+        """``parse()`` after this token; no expression (the place kept) when it fails."""
+        saved = self.i
+        self.i += 1
+        try:
+            return parse()
+        except _NoExpression:
+            self.i = saved
+            raise
 
     def atom(self) -> tuple:
         kind, value, line, col = self.peek()
@@ -211,12 +214,7 @@ class _Parser:
             return ("id", value, line, col)
         if kind == "op" and value == "(":
             saved = self.i
-            self.i += 1
-            try:
-                inner = self.expression()
-            except _NoExpression:
-                self.i = saved
-                raise
+            inner = self.past_one(self.expression)
             if not self.at(")"):
                 self.i = saved  # ``(y & "goal")``: a state formula in parentheses
                 raise _NoExpression()
@@ -225,18 +223,13 @@ class _Parser:
         raise _NoExpression()
 
     # ------------------------------------------------------------ state formulas
-    def state(self) -> tuple:
-        left = self.state_and()
-        while self.at("|"):
+    def state(self, op: str = "|") -> tuple:
+        """A state formula: ``|`` over ``&`` over the prefix ``!`` (left to right)."""
+        operand = (lambda: self.state("&")) if op == "|" else self.state_unary
+        left = operand()
+        while self.at(op):
             self.i += 1
-            left = ("fbin", "|", left, self.state_and())
-        return left
-
-    def state_and(self) -> tuple:
-        left = self.state_unary()
-        while self.at("&"):
-            self.i += 1
-            left = ("fbin", "&", left, self.state_unary())
+            left = ("fbin", op, left, operand())
         return left
 
     def state_unary(self) -> tuple:
