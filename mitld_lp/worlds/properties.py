@@ -47,7 +47,6 @@ from dataclasses import dataclass, field
 from fractions import Fraction
 from typing import Any
 
-from mitld_lp.util.decimals import Written
 from mitld_lp.worlds import WorldError
 
 __all__ = ["Program", "PropertyError", "Query", "read_program", "parse_constants",
@@ -110,6 +109,8 @@ def parse_constants(text: str, where: str = "--const") -> dict[str, bool | int |
         elif re.fullmatch(r"[-+]?\d+", value):
             out[name] = int(value)
         else:
+            from mitld_lp.util.decimals import Written  # numpy: only for a decimal
+
             try:
                 number = Written(value)
             except ValueError:
