@@ -107,7 +107,17 @@ CASES = [
     'Pmax=? [F (true)]', 'Pmax=? [F x = .5]', 'const double K; Pmax=? [F x*K=1]',
     'const bool K; Pmax=? [F K]', 'const K = 2; Pmax=? [F x=K]', 'const int x = 2; Pmax=? [F y]',
     'Pmax=? [F x=D]', 'Pmax=? [F x*q < 1]', 'Pmax=? [F x*r < 1]', 'P>=q [F y]',
-    'Pmax=? [F<=D y]', 'const double h; Pmax=? [F x*h < 1]',
+    'Pmax=? [F<=D y]', 'const double h; Pmax=? [F x*h < 1]', 'Pmax=? [\n F "goal"\n]',
+    '"a":\nPmax=? [F "goal"]', 'Pmax = ? [F "goal"]', 'P >= 0.5 [F "goal"]',
+    'Pmax=? [F "goal"]\n;Pmin=? [F y]', '  \n\n Pmax=? [F "goal"]\n\n', '"a b": Pmax=? [F y]',
+    '"": Pmax=? [F y]', '"1": Pmax=? [F y]; Pmin=? [F y]', '"a-b": Pmax=? [F y]',
+    '"_a1": Pmax=? [F y]', 'const int K = 2;\nconst double K2 = K/4;\nPmax=? [F x*K2 > 1]',
+    'Pmax=? [F x>=1.5E1]', 'Pmax=? [F x=00]', 'Pmax=? [F x=2.50]', 'Pmax=? [X F "goal"]',
+    'Pmax=? [F[0,0] "goal"]', 'Pmax=? [F<=0.0 "goal"]', 'Pmax=? [(x=1 | "goal") U y]',
+    'Pmax=? [!(x=1) U !"goal"]', 'Pmin=? [G !(x=1 & y)]', 'P>=1 [G true]', 'P<=0 [F false]',
+    'Pmax=? [F "goal" & true]', 'Pmax=? [F !(true)]', 'Pmax=? [F !x=1]', 'Pmax=? [F -x=-1]',
+    'Pmax=? [F !y=y]', 'Pmax=? [F x=1=y]', 'Pmax=? [F x<1<2]', 'Pmax=? [F (y)=(y)]',
+    'Pmax=? [F x = 3/6]', 'Pmax=? [F x = 1/3*3]',
 ]
 
 

@@ -399,6 +399,8 @@ class _Parser:
             name = None
             if self.peek()[0] == "label" and self.peek(1)[1] == ":":
                 name = self.peek()[1][1:-1]
+                if not re.fullmatch(r"[A-Za-z_]\w*", name):
+                    raise Decline(f"the name {name!r}")  # Storm's reader refuses it
                 self.i += 2
             formula = self.operator()
             props.append(PropertyText(name, formula, line, col))
