@@ -10,7 +10,8 @@ First the hand-written properties (``CASES``, on the program ``MODEL``), then ea
 QVBS properties file is read whole, then each of its properties alone (with the file's
 ``const`` lines), for the first model file of the family and the constants of its
 first instance in ``index.json``.  Prints one line per difference and the counts;
-writes ``property_reader_check.md`` into the output folder.
+writes ``property_reader_check.md`` into the output folder (``--out``; by default the
+scratch folder ``experiments/out/quick``).
 """
 
 from __future__ import annotations
@@ -239,6 +240,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--qvbs", type=Path, default=None,
                     help="the QVBS benchmarks folder (without it: the hand-written cases)")
     args = ap.parse_args(argv)
+    if args.out is None:  # a scratch folder, never the committed results
+        args.out = _common.QUICK_OUT
     out = _common.out_dir(args)
     counts = {"own": 0, "declined": 0, "DIFFERENT": 0}
     rows = []

@@ -13,7 +13,8 @@ Per QVBS instance and property (CPU seconds, the routes taking turns, ``--repeat
   this checkout, and of ``--compare BASE`` (a checkout of the base), with the answer;
 * ``storm``: a stormpy script doing Storm's whole run (import, parse, build, sound check).
 
-Writes ``property_reader_times.md`` into the output folder.
+Writes ``property_reader_times.md`` into the output folder (``--out``; by default the
+scratch folder ``experiments/out/quick``).
 """
 
 from __future__ import annotations
@@ -86,6 +87,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--compare", type=Path, default=None, help="a checkout of the base")
     ap.add_argument("--repeats", type=int, default=None)
     args = ap.parse_args(argv)
+    if args.out is None:  # a scratch folder, never the committed results
+        args.out = _common.QUICK_OUT
     out = _common.out_dir(args)
     repeats = args.repeats or (1 if args.quick else 3)
     cases = CASES[:1] if args.quick else CASES
