@@ -3,7 +3,10 @@ posed as the package's tasks.
 
 ``read_properties(program, text, where)`` parses a property (``Pmax=? [F "goal"]``) or
 a properties file's text with :func:`stormpy.parse_properties` against the PRISM
-program, so that labels, variables and constants mean what they mean to Storm.
+program, so that labels, variables and constants mean what they mean to Storm.  The
+door reads the forms posed below with our own reader first
+(:mod:`mitld_lp.worlds.property_own`, the same printing and posing, no stormpy) and
+comes here for the rest.
 :func:`pose_property` maps one parsed property onto a task of the package, or refuses
 it naming the form and the reason (:class:`PropertyError`, never another problem
 answered in its place):
