@@ -3,12 +3,14 @@
 
 ``--prop`` is a property or a properties file (``.props``, ``.prctl``, ``.pctl``: every
 property of it, one line or one JSON object each, or the one a name or a number from 1
-picks); each is posed as a task by :mod:`mitld_lp.worlds.properties` (the forms it
-refuses are refused by name, exit 2) and answered with the certified bracket; ``P~p``
-is answered true or false by the bracket, or undecided when the bracket straddles
-``p`` (exit 3).  ``--spec`` poses an MITLD task over the same file instead, answered as
-a model file's (:func:`world_model`).  ``--objective`` sets a model file's objective
-too (:mod:`mitld_lp.cli.solve` passes it to :func:`mitld_lp.synthesis.pose`).
+picks), read by our reader (:mod:`mitld_lp.worlds.property_own`) or, for the forms it
+leaves to Storm, by Storm's; each is posed as a task by
+:mod:`mitld_lp.worlds.properties` (the forms it refuses are refused by name, exit 2)
+and answered with the certified bracket; ``P~p`` is answered true or false by the
+bracket, or undecided when the bracket straddles ``p`` (exit 3).  ``--spec`` poses an
+MITLD task over the same file instead, answered as a model file's (:func:`world_model`).
+``--objective`` sets a model file's objective too (:mod:`mitld_lp.cli.solve` passes it
+to :func:`mitld_lp.synthesis.pose`).
 """
 
 from __future__ import annotations
@@ -164,7 +166,8 @@ def _properties(args: argparse.Namespace, constants: dict[str, Any]) -> tuple[li
     ``--prop NAME`` or ``--prop NUMBER`` names)."""
     from mitld_lp.files import rules
     from mitld_lp.worlds import WorldError
-    from mitld_lp.worlds.properties import instantiate, pick, read_program, read_properties
+    from mitld_lp.worlds.properties import instantiate, pick, read_program
+    from mitld_lp.worlds.property_own import read_any
 
     try:
         program = read_program(args.model)
@@ -198,7 +201,7 @@ def _properties(args: argparse.Namespace, constants: dict[str, Any]) -> tuple[li
     _declared(args, constants, program, {k for k in constants
                                          if re.search(rf"\b{re.escape(k)}\b", text)})
     try:
-        props = read_properties(program.program, text, where, constants)
+        props = read_any(program, text, where, constants)  # ours, or Storm's reader
         return pick(props, which[0] if which else None, where), program
     except WorldError as exc:
         raise ModelError(str(exc)) from exc
@@ -216,6 +219,7 @@ def solve_properties(args: argparse.Namespace, policy_file: Path | None = None) 
     from mitld_lp.synthesis import pose, solve
     from mitld_lp.worlds.prism_rewards import is_reward
     from mitld_lp.worlds.properties import PropertyError, pose_property
+    from mitld_lp.worlds.property_own import OwnProperty
     from mitld_lp.worlds.reward_bounded import is_reward_bounded
 
     constants = _constants(args)
@@ -227,14 +231,15 @@ def solve_properties(args: argparse.Namespace, policy_file: Path | None = None) 
     codes = []
     for name, prop in props:
         started = time.perf_counter()
+        storm = not isinstance(prop, OwnProperty)  # ours reads no R, T, reward bound
         try:
-            if is_reward(prop):  # an expected reward: its own exact solve
+            if storm and is_reward(prop):  # an expected reward: its own exact solve
                 if policy_file is not None:
                     raise UsageError("--policy: an expected reward (R) writes no policy "
                                      "file")
                 codes.append(answer_reward(args, name, prop, program, ours))
                 continue
-            if is_reward_bounded(prop):  # P over F{"r"}<=b: the reward unfolded
+            if storm and is_reward_bounded(prop):  # P over F{"r"}<=b: the reward unfolded
                 if policy_file is not None:
                     raise UsageError("--policy: a reward-bounded probability writes no "
                                      "policy file")

@@ -3,7 +3,10 @@ posed as the package's tasks.
 
 ``read_properties(program, text, where)`` parses a property (``Pmax=? [F "goal"]``) or
 a properties file's text with :func:`stormpy.parse_properties` against the PRISM
-program, so that labels, variables and constants mean what they mean to Storm.
+program, so that labels, variables and constants mean what they mean to Storm.  The
+door reads the forms posed below with our own reader first
+(:mod:`mitld_lp.worlds.property_own`, the same printing and posing, no stormpy) and
+comes here for the rest.
 :func:`pose_property` maps one parsed property onto a task of the package, or refuses
 it naming the form and the reason (:class:`PropertyError`, never another problem
 answered in its place):
@@ -40,18 +43,18 @@ define.
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from fractions import Fraction
 from typing import Any
 
-from mitld_lp.util.decimals import Written
 from mitld_lp.worlds import WorldError
 
 __all__ = ["Program", "PropertyError", "Query", "read_program", "parse_constants",
            "pose_property", "read_properties", "instantiate", "verdict", "pick",
-           "probability_objective",
+           "probability_objective", "objective_of", "refusal", "StatePoser",
            "INIT_FILTER"]
 
 
@@ -109,6 +112,8 @@ def parse_constants(text: str, where: str = "--const") -> dict[str, bool | int |
         elif re.fullmatch(r"[-+]?\d+", value):
             out[name] = int(value)
         else:
+            from mitld_lp.util.decimals import Written  # numpy: only for a decimal
+
             try:
                 number = Written(value)
             except ValueError:
@@ -132,6 +137,22 @@ class Program:
     constants: frozenset[str]
     properties: tuple[Any, ...] = ()
     reserved: frozenset[str] = frozenset()
+    jani: bool = False
+
+    @functools.cached_property
+    def symbols(self) -> Any:
+        """What a property reads of a PRISM program
+        (:class:`mitld_lp.worlds.property_own.Symbols`), None for a JANI model or a
+        program our reader does not take (Storm's reader then reads its properties)."""
+        if self.jani:
+            return None
+        from mitld_lp.worlds.property_own import symbols_of_storm
+        from mitld_lp.worlds.property_parse import Decline
+
+        try:
+            return symbols_of_storm(self.program, self.labels, chain=self.chain)
+        except Decline:
+            return None
 
     @property
     def chain(self) -> bool:
@@ -153,7 +174,7 @@ def read_program(path: str) -> Program:
 
         jani = read_jani(path)
         return Program(jani.model, jani.labels, jani.constants, tuple(jani.properties),
-                       jani.variables)
+                       jani.variables, jani=True)
     from mitld_lp.worlds.prism_depth import ExpressionDepth, check_text
     from mitld_lp.worlds.prism_program import parse_program
 
@@ -256,12 +277,14 @@ def pick(props: list[Any], which: str | None, where: str) -> list[tuple[str, Any
 # --------------------------------------------------------------------------- posing
 
 
-def _refuse(name: str, text: str, form: str, why: str) -> PropertyError:
+def refusal(name: str, text: str, form: str, why: str) -> PropertyError:
     return PropertyError(f"property {name} ({text}): {form} is refused: {why}")
 
 
-class _Poser:
-    """The state formulas of one property made propositions (see the module)."""
+class StatePoser:
+    """The state formulas of one property made propositions (see the module); each
+    formula is read from its printing as Storm prints it (Storm's formula, or our
+    reader's printing of the same: :mod:`mitld_lp.worlds.property_own`)."""
 
     def __init__(self, name: str, text: str, labels: Mapping[str, str],
                  reserved: frozenset[str] = frozenset()) -> None:
@@ -269,7 +292,7 @@ class _Poser:
         self.define: dict[str, str] = {}
 
     def refuse(self, form: str, why: str) -> PropertyError:
-        return _refuse(self.name, self.text, form, why)
+        return refusal(self.name, self.text, form, why)
 
     def state(self, formula: Any) -> str:
         """A state formula (Storm's, or its printing) as a proposition of the task."""
@@ -376,12 +399,15 @@ def pose_property(name: str, prop: Any, labels: Mapping[str, str],
     expression``; ``reserved``: names a new proposition must not take; ``chain``: the
     file is a DTMC, :attr:`Program.chain`), or :class:`PropertyError` naming the form
     refused and why."""
+    own = getattr(prop, "pose", None)
+    if own is not None:  # read by our reader (mitld_lp.worlds.property_own)
+        return own(name, labels, reserved, chain=chain)
     import stormpy.logic as logic  # pyright: ignore[reportMissingImports]
 
     formula = prop.get_raw_formula()
     text = str(formula)
     if not INIT_FILTER.search(str(prop)):
-        raise _refuse(name, text, "a filter", "only the value at the initial state is "
+        raise refusal(name, text, "a filter", "only the value at the initial state is "
                       "answered")
     kinds = ((logic.RewardOperatorFormula, "an expected reward (R)",
               "an expected reward is not the probability of a task (the door "
@@ -395,12 +421,12 @@ def pose_property(name: str, prop: Any, labels: Mapping[str, str],
               "one property poses one objective"))
     for kind, form, why in kinds:
         if isinstance(formula, kind):
-            raise _refuse(name, text, form, why)
+            raise refusal(name, text, form, why)
     if not isinstance(formula, logic.ProbabilityOperatorFormula):
-        raise _refuse(name, text, "a state formula that is not one P operator",
+        raise refusal(name, text, "a state formula that is not one P operator",
                       "one P[...] per property is answered")
     objective, comparison, threshold = probability_objective(name, formula, chain=chain)
-    poser = _Poser(name, text, labels, reserved)
+    poser = StatePoser(name, text, labels, reserved)
     spec = poser.path(formula.subformula)
     return Query(name=name, text=text, spec=spec, define=poser.define, objective=objective,
                  comparison=comparison, threshold=threshold)
@@ -420,14 +446,28 @@ def probability_objective(name: str, formula: Any, letter: str = "P",
         comparison = _COMPARISONS[str(formula.comparison_type).rsplit(".", 1)[-1]]
         # the expression's value: Storm's ``threshold`` of ``P>1/2`` is 0 (integer typed)
         threshold = Fraction(str(formula.threshold_expr.evaluate_as_rational()))
+    optimality = None
     if formula.has_optimality_type:
-        objective = "min" if "MIN" in str(formula.optimality_type).upper() else "max"
+        optimality = "min" if "MIN" in str(formula.optimality_type).upper() else "max"
+    return objective_of(name, str(formula), optimality, comparison, threshold, letter,
+                        what, chain=chain)
+
+
+def objective_of(name: str, text: str, optimality: str | None, comparison: str | None,
+                 threshold: Fraction | None, letter: str = "P",
+                 what: str = "the probability", *, chain: bool = False,
+                 ) -> tuple[str, str | None, Fraction | None]:
+    """``(objective, comparison, threshold)`` of an operator printed ``text`` with the
+    ``optimality`` (``"min"``, ``"max"`` or None) and bound it was written with (see
+    :func:`probability_objective`)."""
+    if optimality is not None:
+        objective = optimality
     elif comparison is not None:  # for every scheduler: the worst one decides
         objective = "min" if comparison in (">=", ">") else "max"
     elif chain:  # one scheduler: its value is the greatest and the least
         objective = "max"
     else:
-        raise _refuse(name, str(formula), f"{letter}=? without min or max",
+        raise refusal(name, text, f"{letter}=? without min or max",
                       f"on an MDP {what} depends on the scheduler: write {letter}max=? "
                       f"or {letter}min=?")
     return objective, comparison, threshold
