@@ -32,7 +32,12 @@ the same bits before and after, or not).  Storm's check of the same product is i
   count ``sweeps`` and ``ms_per_sweep``), the compiled sweeps' order and the block
   renumbered in it (``sweep_order``, ``renumbered``), the policy jump
   (``policy_jump``); the LP stage's greedy block (``lp_greedy``); the minimum's proof
-  that no end component is left (``_escapes``).
+  that no end component is left (``_escapes``);
+* the analysis's parts (fixed-82): the product's components and reach
+  (``an_components``), a maximum's end components with its value-1 states
+  (``an_ends``) or those found apart (``an_prob1e``), the quotient's rows
+  (``an_quotient_rows``) and blocks (``an_quotient_blocks``); and every kernel's link
+  from the loader's cache wherever it falls (``kernel_links``).
 
 ::
 
@@ -138,7 +143,17 @@ TIMED = (("mitld_lp.routes.plain", "solve_models", "solve_stage"),
          ("mitld_lp.solvers.certify_chain", "_gathered", "chain_gather"),
          ("mitld_lp.solvers.certify_chain", "blocks_from", "chain_blocks"),
          ("mitld_lp.solvers.certify_chain", "_Singles.__init__", "chain_singles"),
-         ("mitld_lp.solvers.certify_chain", "walk_of", "chain_walk"))
+         ("mitld_lp.solvers.certify_chain", "walk_of", "chain_walk"),
+         # fixed-82: the analysis's parts where it calls them (the product's components
+         # and reach, a maximum's end components with its value-1 states, or those
+         # found apart, the quotient's rows and blocks) and every kernel's link from the
+         # loader's cache (wherever in the solve it falls)
+         ("mitld_lp.solvers.analysis", "components_reaching", "an_components"),
+         ("mitld_lp.solvers.analysis", "ends_and_sure", "an_ends"),
+         ("mitld_lp.solvers.analysis", "prob1e_on_product", "an_prob1e"),
+         ("mitld_lp.solvers.analysis", "quotient_rows", "an_quotient_rows"),
+         ("mitld_lp.solvers.analysis", "quotient_blocks", "an_quotient_blocks"),
+         ("mitld_lp.util.kernel_loader", "_load", "kernel_links"))
 """The entry points timed in place: (module, attribute, column); the column is the
 attribute's name where no third is given.  ``solve_stage``: the plain route's
 ``solve_models`` (the analysis to the certificates, without the result's record);

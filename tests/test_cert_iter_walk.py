@@ -246,3 +246,56 @@ def test_the_repair_pass_by_pass_is_the_repair_level_by_level(seed: int, upper: 
         assert all(Fraction(float(x[s])) >= exact[s] for s in live.tolist())
     else:
         assert all(Fraction(float(x[s])) <= exact[s] for s in live.tolist())
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("upper", [True, False])
+def test_the_passes_in_one_compiled_call_are_the_numpy_passes(seed: int, upper: bool,
+                                                              monkeypatch) -> None:
+    """fixed-82: the repair's passes by the rounds' kernel (every live state one level,
+    until none moves) give the NumPy passes' bounds (bits), count and verdict; the
+    result passes the whole check and bounds the exact optimum (fractions)."""
+    from mitld_lp.solvers import certify_compiled as CC
+    from mitld_lp.util import kernel_loader
+
+    pytest.importorskip("numba")
+    mdp, goal, dead = _layered(seed)
+    st, rnd, level_of = _inputs(mdp)
+    target = np.asarray(mdp.target, dtype=bool)
+    zero = np.zeros(mdp.n_states, dtype=bool)
+    zero[dead] = True
+    free = target.copy() if upper else target | zero
+    rng = np.random.default_rng(100 + seed)
+    x0 = np.where(target, 1.0, rng.random(mdp.n_states) * (0.3 if upper else 1.0))
+    x0[dead] = 0.0
+    failing = C._fails(st, rnd, x0, free, upper)
+    assert failing.any()
+    calls = []
+    real = R.compiled_rounds
+
+    def counted(*args):
+        got = real(*args)
+        calls.append(got is not None)
+        return got
+
+    monkeypatch.setattr(R, "compiled_rounds", counted)
+    runs = []
+    for compiled in (True, False):
+        monkeypatch.setattr(kernel_loader, "compiled_paid", lambda c=compiled: c)
+        monkeypatch.setattr(CC, "_ROUNDS_WARM", [compiled])
+        calls.clear()
+        x = x0.copy()
+        repair = R.Repair(st, rnd, free, level_of, None, upper)
+        runs.append((repair.run(x, failing), x.tobytes(), repair.moved))
+        assert calls == [compiled]  # the passes' route, by the kernel or not
+    assert runs[0] == runs[1]
+    ok, raw, moved = runs[0]
+    assert ok and moved > 0
+    x = np.frombuffer(raw)
+    assert not C._fails(st, rnd, x, free, upper).any()
+    exact = _exact_optimum(mdp, goal, upper)
+    live = np.flatnonzero(~free)
+    if upper:
+        assert all(Fraction(float(x[s])) >= exact[s] for s in live.tolist())
+    else:
+        assert all(Fraction(float(x[s])) <= exact[s] for s in live.tolist())

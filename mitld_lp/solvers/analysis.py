@@ -81,7 +81,7 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, as_state_mask
 from mitld_lp.solvers.analysis_ends import end_components, ends_and_sure, may_cycle
-from mitld_lp.solvers.analysis_gates import attractor_walks
+from mitld_lp.solvers.analysis_gates import attractor_walks, pay_if_warm
 from mitld_lp.solvers.analysis_patterns import compact, largest_inside
 from mitld_lp.solvers.analysis_singles import (
     prob1e_on_product,
@@ -276,6 +276,9 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # were alive together at the analysis's peak, then the reversal beside the sweeps'
     # gate and the components' checks)
     minimum = sense is Sense.MIN
+    # the load the certificate of this product pays, paid first where its kernels are
+    # warm: the walks below run compiled (analysis_gates)
+    pay_if_warm(int(m.nnz))
     if minimum:
         attracted = _prob0e(m, mdp.row_groups, goal, wide, extra.any())
     # the product's components and reach; its levels only where the walk gives them

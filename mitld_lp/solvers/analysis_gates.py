@@ -34,8 +34,19 @@ A kernel is warm where the loader would link it from its cache
 (:func:`~mitld_lp.util.kernel_loader.cached`: the loader on, numba installed, a cache
 file of the kernel not older than its module); a cold cache (numba's compile, seconds),
 the loader off (``MITLD_LP_KERNEL_LOADER=0``) or numba missing keep the NumPy walks,
-which give the same sets, components and numbering.  Imports nothing of the solvers but
-the walks' gate (NumPy and the standard library)."""
+which give the same sets, components and numbering.
+
+The load itself is paid at the analysis's start (:func:`pay_if_warm`) where the
+certificate of the same product would pay it anyway
+(:func:`~mitld_lp.solvers.certify_compiled.load_if_warm`: at least
+:data:`~mitld_lp.solvers.certify_compiled.WARM_LOAD_MIN_ENTRIES` entries, its kernels
+warm) and every kernel of :data:`ANALYSIS_KERNELS` is warm: no load is added to the
+process, and the analysis's walks run compiled from the first (``bus_scaled`` n64 d3,
+1.77 million entries, whose level blocks are too small for the analysis's guess of the
+sweeps, :func:`~mitld_lp.solvers.analysis._sweeps_compiled`: its end components searched
+by NumPy rounds and Python's Tarjan, its components by SciPy, where a second solve in
+the same process ran them compiled).  Imports nothing of the solvers but the walks' gate
+and, at the first such call, the certificate's gate (NumPy and the standard library)."""
 
 from __future__ import annotations
 
@@ -45,8 +56,9 @@ from mitld_lp.solvers import walks as _walks
 from mitld_lp.solvers.walks import compiled_walks, load_walks
 from mitld_lp.util import kernel_loader
 
-__all__ = ["ATTRACTOR", "DENSE_ENTRIES", "LEVELS", "PAID_MIN_ENTRIES", "WARM_MIN_ENTRIES",
-           "attractor_walks", "component_walks", "level_walks", "warm"]
+__all__ = ["ANALYSIS_KERNELS", "ATTRACTOR", "DENSE_ENTRIES", "LEVELS", "PAID_MIN_ENTRIES",
+           "WARM_MIN_ENTRIES", "attractor_walks", "component_walks", "level_walks",
+           "pay_if_warm", "warm"]
 
 WARM_MIN_ENTRIES = 100_000
 """Stored entries from which an attractor runs compiled on a warm cache before any
@@ -67,6 +79,14 @@ DENSE_ENTRIES = 8
 ATTRACTOR = ("mitld_lp.solvers.compiled_graph", "_backward")
 LEVELS = ("mitld_lp.solvers.compiled_graph", "state_levels")
 """The kernels (module, name) whose cache files are asked for."""
+
+ANALYSIS_KERNELS = (ATTRACTOR, LEVELS, ("mitld_lp.solvers.compiled_graph", "closed_among"))
+"""The compiled walks a maximum's analysis runs once a load is paid (the attractor, the
+components with their levels, the end components' test): :func:`pay_if_warm` pays the
+load only where each has a cache file, so that paying it early makes the analysis compile
+none of them (numba's compile, seconds).  The end components' compiled search, run only
+where the test finds one, is left to its cache as after the sweeps' load
+(:func:`~mitld_lp.solvers.walks.compiled_walks`)."""
 
 _WARM: dict[tuple[str, str], bool] = {}  # looked up once a process
 
@@ -108,3 +128,18 @@ def component_walks(entries: int, states: int) -> Any:
     if entries < _walks.COMPILED_MIN_ENTRIES and entries < DENSE_ENTRIES * states:
         return None
     return compiled_walks(entries)
+
+
+def pay_if_warm(entries: int) -> bool:
+    """Whether a kernel's load is paid for the analysis of a product of ``entries``
+    stored entries, paying it now where every kernel of :data:`ANALYSIS_KERNELS` is warm
+    and the product's certificate would pay it anyway
+    (:func:`~mitld_lp.solvers.certify_compiled.load_if_warm`, whose rule decides: the
+    same load, earlier).  Only which walk runs changes, not a set, component or number."""
+    if kernel_loader.compiled_paid():
+        return True
+    if not all(warm(k) for k in ANALYSIS_KERNELS):
+        return False
+    from mitld_lp.solvers.certify_compiled import load_if_warm
+
+    return load_if_warm(entries)

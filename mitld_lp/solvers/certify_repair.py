@@ -444,10 +444,19 @@ class Repair:
         values, as the level's one round does; a state whose rows read no moved state
         and that passed the check needs no move (its need is what the check read), so
         only the readers are taken up; and the states moved are counted once each, as
-        in one round a level."""
+        in one round a level.  Where the rounds' kernel runs, its passes are one call
+        (:func:`~mitld_lp.solvers.certify_compiled.compiled_rounds` on every ``live``
+        state as one level, until none moves: the same needs read before any move, the
+        same moves and readers, a pass's order aside, which no need reads)."""
+        if self.readers_of is None:
+            self.readers_of = readers_by_column(self.st)
+        ever = np.zeros(x.shape[0], dtype=bool)
+        if compiled_rounds(self.st, self.rnd, x, live, failing[live], self.upper,
+                           self.readers_of, ever, 1 << 62) is not None:
+            self.moved += int(np.count_nonzero(ever))
+            return
         in_walk = np.zeros(x.shape[0], dtype=bool)
         in_walk[live] = True
-        ever = np.zeros(x.shape[0], dtype=bool)
         todo = np.flatnonzero(failing & in_walk)
         while todo.size:
             changed = self._move(x, todo, _needed(self.st, self.rnd, x, todo, self.upper))
