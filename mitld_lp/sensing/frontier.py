@@ -58,6 +58,7 @@ from mitld_lp.sensing.rows import (
     join_parts,
     lex_order,
     load_kernels,
+    merged_entries,
     mix64,
     narrow,
     ordered_groups,
@@ -404,8 +405,10 @@ class FrontierBuilder(StepRules):
         """The expansion's transitions (choice, column, probability) in each choice's
         order one state at a time would make them, with the same sums: the absorbing
         records as the loops meet them (their mass summed in the loops' order), then
-        the information states as their observations come.  ``ends``: the rows that
-        end in a record, concatenated from lists bounded by ``lists``."""
+        the information states as their observations come, a choice's entries into one
+        state made one (:func:`merged_entries`).  ``ends``: the rows that end in a record,
+        concatenated from lists bounded by ``lists``."""
+        c, g_first, target, total = merged_entries(c, g_first, target, total)
         found = compiled.end_sums(ends, lists)
         if found is not None:  # by the kernels: the lists merged, one pass
             g_c, g_r, mass, place = found

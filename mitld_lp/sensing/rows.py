@@ -18,7 +18,8 @@ import numpy as np
 __all__ = ["groups", "lex_order", "ordered_groups", "spread", "fsum_by", "mix64",
            "pack_words", "Table", "Lookup", "INT", "DENSE", "COMPILED_MIN_STATES",
            "COMPILED_MIN_ESTIMATE", "load_kernels", "running_kernels", "compiled_on",
-           "scatter", "small_pages", "narrow", "join_parts"]
+           "scatter", "small_pages", "narrow", "join_parts", "merged_entries",
+           "MERGE_ENTRIES"]
 
 INT = np.int64
 _I = INT
@@ -275,6 +276,36 @@ def _dd_sums(starts: np.ndarray, count: np.ndarray, values: np.ndarray) -> tuple
         low[live] += error
         size[live] += np.abs(error)
     return high, low, size
+
+
+MERGE_ENTRIES = True
+"""Whether :func:`merged_entries` merges (tests/test_sensed_merged_entries.py builds
+without it to compare)."""
+
+
+def merged_entries(c: np.ndarray, first: np.ndarray, target: np.ndarray,
+                   total: np.ndarray) -> tuple[np.ndarray, ...]:
+    """A level's entries into information states, one per observation: choice ``c``,
+    the observation's first row ``first``, its state ``target`` and mass ``total``, with
+    the entries of one choice into one state made one, at the place of the first and
+    with their masses summed left to right in the order of their places, as one state at
+    a time sums them into its row (tests/test_sensing_build.py), and the other entries
+    as they are.  Several observations lead to one state where they differ only in what
+    the state forgets (with false alarms: reports counted the same, merge.py's
+    ``Counts``): 41% of the transitions of the bus case's camera with false alarms
+    (experiments/bench_sensed.py), which every sweep of the solve read twice over."""
+    if not MERGE_ENTRIES or len(c) < 2:
+        return c, first, target, total
+    order = lex_order(c, target, first)
+    cs, ts = c[order], target[order]
+    head = np.ones(len(c), dtype=bool)
+    head[1:] = (cs[1:] != cs[:-1]) | (ts[1:] != ts[:-1])
+    if head.all():
+        return c, first, target, total
+    # bincount adds in the array's order: each sum left to right, from 0.0 (exact)
+    sums = np.bincount(np.cumsum(head) - 1, weights=total[order])
+    keep = order[head]
+    return c[keep], first[keep], target[keep], sums
 
 
 def spread(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
