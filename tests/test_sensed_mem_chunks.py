@@ -65,7 +65,6 @@ def test_chunk_end_bounds_the_hypotheses() -> None:
     fb.cols = frontier.Columns(6)
     counts = np.array([3, 4, 2, 9, 1, 1], np.int64)
     fb.cols.extend(tuple(np.zeros(6, np.int64) for _ in range(5)) + (counts,))
-    fb.n_hyps = 0  # few found: the bound is CHUNK_HYPOTHESES (below CHUNK_LEAST)
     bound = chunks.CHUNK_HYPOTHESES
     try:
         chunks.CHUNK_HYPOTHESES = 9

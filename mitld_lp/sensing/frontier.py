@@ -505,7 +505,7 @@ class FrontierBuilder(StepRules):
 
     def chunk_end(self, head: int, end: int) -> int:
         """The end of the chunk from ``head``, at most ``end`` (:func:`chunk_end`)."""
-        return chunk_end(self.cols.data[5, head:end], head, self.n_hyps)
+        return chunk_end(self.cols.data[5, head:end], head)
 
     # ---------------------------------------------------------------- the MDP
 
