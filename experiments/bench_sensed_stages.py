@@ -155,8 +155,7 @@ def storm_check(mdp: Any) -> tuple[str, float, float]:
     import tempfile
 
     import stormpy
-    import stormpy.environments as envs
-    from bench_sweeps import METHODS, PRECISION
+    from bench_sweeps import METHODS, storm_env
 
     from mitld_lp.solvers.export import write_drn
 
@@ -167,12 +166,7 @@ def storm_check(mdp: Any) -> tuple[str, float, float]:
     prop = stormpy.parse_properties('Pmax=? [F "accept"]')[0]
     found = []
     for name in METHODS:
-        env = stormpy.Environment()
-        env.solver().force_soundness = True
-        minmax = env.solver().min_max()
-        minmax.method = getattr(envs.MinMaxMethod, name)
-        minmax.precision = stormpy.Rational(PRECISION)
-        minmax.relative_termination_criterion = False
+        env = storm_env(name)
         c = time.process_time()
         result = stormpy.model_checking(model, prop, environment=env)
         found.append((time.process_time() - c, name,
