@@ -32,7 +32,9 @@ that checkout (``base_*`` columns: the build before, its states), and checks tha
 give the same bracket (to 1e-9); ``same`` says ``yes`` where the products are the same to
 the bit (equal digests) and so are the brackets, ``size`` where the sizes and brackets (to
 1e-9) agree but not every bit, ``smaller`` where the brackets agree on fewer states (the
-merge of :mod:`mitld_lp.sensing.merge`), ``no`` where the brackets differ.
+merge of :mod:`mitld_lp.sensing.merge`) or transitions (a choice's entries into one state
+merged, :func:`mitld_lp.sensing.rows.merged_entries`), ``no`` where the brackets differ;
+``certified``: ours, and the base's after a slash where compared.
 
 Run: ``python experiments/bench_sensed.py [--quick] [--out DIR] [--compare DIR]
 [--repeats N] [--only TEXT]`` (``N`` runs of each child, the least CPU reported; only
@@ -69,7 +71,8 @@ QUICK = (
     ("bus_grid.toml", (("b1", 0.7), ("b2", 0.7)), 0.05),
     ("bus_grid.toml", (("b2", 0.8, 0.05),), 0.1),
 )
-HEADER = ["case", "states", "choices", "transitions", "lower", "upper", "digest",
+HEADER = ["case", "states", "choices", "transitions", "lower", "upper", "certified",
+          "digest",
           "estimate", "build_cpu", "states_per_s", "process_cpu", "base_states",
           "base_build_cpu", "base_states_per_s", "base_process_cpu", "speedup", "same",
           "storm_of", "storm_value", "storm_s"]
@@ -130,7 +133,7 @@ def worker(index: int, quick: bool, out: Path, storm: bool) -> None:
     row: dict[str, Any] = {
         "states": r.mdp.n_states, "choices": r.mdp.n_choices,
         "transitions": int(r.mdp.matrix.nnz), "lower": r.lower, "upper": r.upper,
-        "digest": digest(r.mdp),
+        "certified": "yes" if r.certified else "NO", "digest": digest(r.mdp),
         "build_cpu": built["cpu"], "process_cpu": process,
         "estimate": max((e for f, e in seen if 2 * f < r.mdp.n_states), default=None),
         "states_per_s": r.mdp.n_states / built["cpu"],
@@ -220,14 +223,16 @@ def main(argv: list[str] | None = None) -> int:
             row["base_build_cpu"], row["base_process_cpu"] = (base["build_cpu"],
                                                               base["process_cpu"])
             row["base_states"] = base["states"]
+            row["certified"] = f"{ours['certified']}/{base['certified']}"
             row["base_states_per_s"] = base["states"] / base["build_cpu"]
             row["speedup"] = base["build_cpu"] / ours["build_cpu"]
             agree = (abs(base["lower"] - ours["lower"]) <= 1e-9
                      and abs(base["upper"] - ours["upper"]) <= 1e-9)
             sizes = all(base[k] == ours[k] for k in ("states", "choices", "transitions"))
             bits = all(base[k] == ours[k] for k in ("digest", "lower", "upper"))
+            fewer = all(ours[k] <= base[k] for k in ("states", "transitions"))
             row["same"] = ("no" if not agree else "yes" if bits else "size" if sizes else
-                           "smaller" if ours["states"] < base["states"] else "larger")
+                           "smaller" if fewer else "larger")
         rows.append(row)
         print(C.text_table(HEADER, [[fmt(k, row.get(k)) for k in HEADER]]), flush=True)
     table = [[fmt(k, r.get(k)) for k in HEADER] for r in rows]
@@ -242,7 +247,8 @@ def main(argv: list[str] | None = None) -> int:
         "`base_*` the same case with "
         f"the package of `--compare` ({args.compare}), `same`: `yes` the same product to "
         "the bit (`digest`, a SHA-256 of its matrix) and the same bracket to the bit, `size` "
-        "equal sizes and brackets (1e-9), `smaller` equal brackets on fewer states; Storm "
+        "equal sizes and brackets (1e-9), `smaller` equal brackets on fewer states or "
+        "transitions; Storm "
         "(`storm_of`): Pmax "
         "on the same product as DRN, or the worst case on the exported interval chain "
         "with a band (parse and check).\n"))

@@ -21,7 +21,7 @@ from test_sensing_build import CASES, assert_same, reference
 
 from mitld_lp import Model, synthesize
 from mitld_lp.automata.translate import to_dta
-from mitld_lp.sensing import frontier, rows
+from mitld_lp.sensing import chunks, frontier, rows
 from mitld_lp.sensing.belief import belief_product
 
 
@@ -39,7 +39,7 @@ def test_one_state_chunks_equal_one_state_at_a_time(monkeypatch, case: str,
     state at a time, NumPy lines and kernels alike."""
     if kernels:
         pytest.importorskip("numba")
-    monkeypatch.setattr(frontier, "CHUNK_HYPOTHESES", 1)
+    monkeypatch.setattr(chunks, "CHUNK_HYPOTHESES", 1)
     model = CASES[case]()
     with rows.running_kernels(kernels):
         belief = _build(model, late_reports=False, merge=False)
@@ -50,7 +50,7 @@ def test_one_state_chunks_equal_one_state_at_a_time(monkeypatch, case: str,
 def test_one_state_chunks_optimum_equals_expectimax(monkeypatch) -> None:
     """Two events, each with a camera that misses: the certified bracket of the product
     built a state a chunk holds the expectimax over observation histories."""
-    monkeypatch.setattr(frontier, "CHUNK_HYPOTHESES", 1)
+    monkeypatch.setattr(chunks, "CHUNK_HYPOTHESES", 1)
     r = synthesize(Model.from_game(TWO, SPEC2, sensors={"b1": {"detect": 0.6},
                                                         "b2": {"detect": 0.4}}))
     assert r.route == "sensed" and r.certified
@@ -65,16 +65,16 @@ def test_chunk_end_bounds_the_hypotheses() -> None:
     fb.cols = frontier.Columns(6)
     counts = np.array([3, 4, 2, 9, 1, 1], np.int64)
     fb.cols.extend(tuple(np.zeros(6, np.int64) for _ in range(5)) + (counts,))
-    bound = frontier.CHUNK_HYPOTHESES
+    bound = chunks.CHUNK_HYPOTHESES
     try:
-        frontier.CHUNK_HYPOTHESES = 9
+        chunks.CHUNK_HYPOTHESES = 9
         # 3 + 4 + 2 = 9 fits, + 9 does not; from state 3: 9 alone; from 4: 1 + 1
         assert [fb.chunk_end(0, 6), fb.chunk_end(3, 6), fb.chunk_end(4, 6)] == [3, 4, 6]
-        frontier.CHUNK_HYPOTHESES = 2
+        chunks.CHUNK_HYPOTHESES = 2
         assert fb.chunk_end(0, 6) == 1  # 3 > 2: the first state alone
         assert fb.chunk_end(1, 2) == 2  # never past the level's end
     finally:
-        frontier.CHUNK_HYPOTHESES = bound
+        chunks.CHUNK_HYPOTHESES = bound
 
 
 def test_joined_drops_each_part_once_copied() -> None:

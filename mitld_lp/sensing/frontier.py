@@ -35,6 +35,7 @@ from mitld_lp.automata.sta import STA
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.product import Absorbing
 from mitld_lp.sensing import compiled
+from mitld_lp.sensing.chunks import CHUNK, chunk_end
 from mitld_lp.sensing.growth import ALARM_PAST, Growth
 from mitld_lp.sensing.info import (
     BYTES_PER_HYPOTHESIS,
@@ -57,6 +58,7 @@ from mitld_lp.sensing.rows import (
     join_parts,
     lex_order,
     load_kernels,
+    merged_entries,
     mix64,
     narrow,
     ordered_groups,
@@ -74,14 +76,6 @@ __all__ = ["FrontierBuilder"]
 
 log = logging.getLogger("mitld_lp.sensing.belief")
 
-CHUNK = 8_192  # the most states expanded together (and CHUNK_HYPOTHESES)
-CHUNK_HYPOTHESES = 8_192
-"""The most hypotheses in the states of one chunk (:meth:`FrontierBuilder.chunk_end`; one
-state alone may hold more).  A chunk's rows, some twenty numbers each, are its hypotheses'
-branches and successors: on issue 45's sensed case 8,192 states of a late level held some
-50,000 hypotheses and made 635,000 rows, whose pages and arrays (200 MB) set the build's
-peak at 323 bytes a transition; bounded so, a chunk makes at most some 210,000 rows and
-the peak is 130, for the same build time."""
 _FAR = 1 << 60  # a clock past every bound (StepRules.clock_key caps at its argument)
 
 
@@ -411,8 +405,10 @@ class FrontierBuilder(StepRules):
         """The expansion's transitions (choice, column, probability) in each choice's
         order one state at a time would make them, with the same sums: the absorbing
         records as the loops meet them (their mass summed in the loops' order), then
-        the information states as their observations come.  ``ends``: the rows that
-        end in a record, concatenated from lists bounded by ``lists``."""
+        the information states as their observations come, a choice's entries into one
+        state made one (:func:`merged_entries`).  ``ends``: the rows that end in a record,
+        concatenated from lists bounded by ``lists``."""
+        c, g_first, target, total = merged_entries(c, g_first, target, total)
         found = compiled.end_sums(ends, lists)
         if found is not None:  # by the kernels: the lists merged, one pass
             g_c, g_r, mass, place = found
@@ -508,11 +504,8 @@ class FrontierBuilder(StepRules):
                                           self.record(Absorbing.TRUNCATED)))
 
     def chunk_end(self, head: int, end: int) -> int:
-        """The end of the chunk from ``head``: at most ``end``, and past the first state
-        only while its states hold :data:`CHUNK_HYPOTHESES` hypotheses in all (a chunk's
-        rows, hence its working arrays, grow with its hypotheses, not its states)."""
-        held = np.cumsum(self.cols.data[5, head:end])
-        return head + max(int(np.searchsorted(held, CHUNK_HYPOTHESES, side="right")), 1)
+        """The end of the chunk from ``head``, at most ``end`` (:func:`chunk_end`)."""
+        return chunk_end(self.cols.data[5, head:end], head)
 
     # ---------------------------------------------------------------- the MDP
 
