@@ -43,7 +43,6 @@ define.
 
 from __future__ import annotations
 
-import functools
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -138,21 +137,6 @@ class Program:
     properties: tuple[Any, ...] = ()
     reserved: frozenset[str] = frozenset()
     jani: bool = False
-
-    @functools.cached_property
-    def symbols(self) -> Any:
-        """What a property reads of a PRISM program
-        (:class:`mitld_lp.worlds.property_own.Symbols`), None for a JANI model or a
-        program our reader does not take (Storm's reader then reads its properties)."""
-        if self.jani:
-            return None
-        from mitld_lp.worlds.property_own import symbols_of_storm
-        from mitld_lp.worlds.property_parse import Decline
-
-        try:
-            return symbols_of_storm(self.program, self.labels, chain=self.chain)
-        except Decline:
-            return None
 
     @property
     def chain(self) -> bool:

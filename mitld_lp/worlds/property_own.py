@@ -38,7 +38,7 @@ from mitld_lp.worlds.property_parse import (
     parse_properties_text,
 )
 
-__all__ = ["Symbols", "OwnProperty", "symbols_of_storm", "read_own", "read_any",
+__all__ = ["Symbols", "OwnProperty", "symbols_of_storm", "symbols_of", "read_own", "read_any",
            "print_formula"]
 
 
@@ -85,6 +85,18 @@ def symbols_of_storm(program: Any, labels: Mapping[str, str], *,
                 variables[v.name] = kind
     formulas = dict(_FORMULA.findall(str(program)))  # stormpy binds no list of them
     return Symbols(dict(labels), constants, variables, formulas, chain, storm_printed=True)
+
+
+def symbols_of(program: Any) -> Symbols | None:
+    """The :class:`Symbols` of a :class:`~mitld_lp.worlds.properties.Program`, None for a
+    JANI model or a program our reader does not take (Storm's reader then reads its
+    properties)."""
+    if program.jani:
+        return None
+    try:
+        return symbols_of_storm(program.program, program.labels, chain=program.chain)
+    except Decline:
+        return None
 
 
 _FORMULA = re.compile(r"^formula (\w+) = (.*);$", re.MULTILINE)
@@ -397,7 +409,7 @@ def read_any(program: Any, text: str, where: str,
     Storm's (:func:`~mitld_lp.worlds.properties.read_properties`)."""
     from mitld_lp.worlds.properties import read_properties
 
-    symbols = getattr(program, "symbols", None)
+    symbols = symbols_of(program)
     if symbols is not None:
         try:
             return list(read_own(symbols, text, where, constants))
