@@ -455,7 +455,7 @@ def batched(model: Any, prop: Any, checks: dict[str, Any]) -> dict[str, Any]:
     for name, got in methods.items():
         if got["cpu"] > 0:
             continue
-        env = bs._env(name)
+        env = bs.storm_env(name)
         c, k = bs._cpu(), 0
         while k == 0 or bs._cpu() - c < BATCH:
             stormpy.model_checking(model, prop, environment=env)

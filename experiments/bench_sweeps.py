@@ -187,7 +187,6 @@ def storm_env(name: str) -> Any:
     return env
 
 
-_env = storm_env  # its name where bench_qvbs.py reads it
 
 
 def _checks(model: Any, prop: Any, methods: tuple[str, ...]) -> dict[str, Any]:
