@@ -196,6 +196,24 @@ def _exact_optimum(mdp, goal: int, upper: bool) -> list[Fraction]:
     return value
 
 
+def _far_candidate(seed: int, upper: bool, draw: int):
+    """A layered model (:func:`_layered`), its check's inputs, the states ``free`` of the
+    side and a candidate far from the optimum (random values drawn with seed ``draw``:
+    many states fail, their moves run up the layers) with its failing states."""
+    mdp, goal, dead = _layered(seed)
+    st, rnd, level_of = _inputs(mdp)
+    target = np.asarray(mdp.target, dtype=bool)
+    zero = np.zeros(mdp.n_states, dtype=bool)
+    zero[dead] = True
+    free = target.copy() if upper else target | zero
+    rng = np.random.default_rng(draw)
+    x0 = np.where(target, 1.0, rng.random(mdp.n_states) * (0.3 if upper else 1.0))
+    x0[dead] = 0.0
+    failing = C._fails(st, rnd, x0, free, upper)
+    assert failing.any()
+    return mdp, goal, st, rnd, level_of, free, x0, failing
+
+
 @pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("upper", [True, False])
 def test_the_repair_pass_by_pass_is_the_repair_level_by_level(seed: int, upper: bool,
@@ -204,18 +222,7 @@ def test_the_repair_pass_by_pass_is_the_repair_level_by_level(seed: int, upper: 
     pass by pass, level by level (``PASSES`` False) and state by state (``SPARSE_LEVEL``
     1); the result passes the whole check, and is a bound of the exact optimum (in
     fractions: above Pmax, below Pmin)."""
-    mdp, goal, dead = _layered(seed)
-    st, rnd, level_of = _inputs(mdp)
-    target = np.asarray(mdp.target, dtype=bool)
-    zero = np.zeros(mdp.n_states, dtype=bool)
-    zero[dead] = True
-    free = target.copy() if upper else target | zero
-    rng = np.random.default_rng(seed)
-    # a candidate far from the optimum: many states fail, their moves run up the layers
-    x0 = np.where(target, 1.0, rng.random(mdp.n_states) * (0.3 if upper else 1.0))
-    x0[dead] = 0.0
-    failing = C._fails(st, rnd, x0, free, upper)
-    assert failing.any()
+    mdp, goal, st, rnd, level_of, free, x0, failing = _far_candidate(seed, upper, seed)
     passes = []
     real = R.Repair._passes
 
@@ -238,7 +245,12 @@ def test_the_repair_pass_by_pass_is_the_repair_level_by_level(seed: int, upper: 
     assert runs[0] == runs[1] == runs[2]
     ok, _, moved = runs[0]
     assert ok and moved > 0
-    x = np.frombuffer(runs[0][1])
+    _assert_a_checked_bound(mdp, goal, st, rnd, np.frombuffer(runs[0][1]), free, upper)
+
+
+def _assert_a_checked_bound(mdp, goal, st, rnd, x, free, upper: bool) -> None:
+    """``x`` passes the whole check and bounds the exact optimum (fractions: above Pmax,
+    below Pmin) on every state not ``free``."""
     assert not C._fails(st, rnd, x, free, upper).any()
     exact = _exact_optimum(mdp, goal, upper)
     live = np.flatnonzero(~free)
@@ -259,26 +271,10 @@ def test_the_passes_in_one_compiled_call_are_the_numpy_passes(seed: int, upper: 
     from mitld_lp.util import kernel_loader
 
     pytest.importorskip("numba")
-    mdp, goal, dead = _layered(seed)
-    st, rnd, level_of = _inputs(mdp)
-    target = np.asarray(mdp.target, dtype=bool)
-    zero = np.zeros(mdp.n_states, dtype=bool)
-    zero[dead] = True
-    free = target.copy() if upper else target | zero
-    rng = np.random.default_rng(100 + seed)
-    x0 = np.where(target, 1.0, rng.random(mdp.n_states) * (0.3 if upper else 1.0))
-    x0[dead] = 0.0
-    failing = C._fails(st, rnd, x0, free, upper)
-    assert failing.any()
-    calls = []
-    real = R.compiled_rounds
-
-    def counted(*args):
-        got = real(*args)
-        calls.append(got is not None)
-        return got
-
-    monkeypatch.setattr(R, "compiled_rounds", counted)
+    mdp, goal, st, rnd, level_of, free, x0, failing = _far_candidate(seed, upper, 100 + seed)
+    calls = []  # each call's answer (None: the NumPy passes ran)
+    monkeypatch.setattr(R, "compiled_rounds",
+                        lambda *a, _real=R.compiled_rounds: calls.append(_real(*a)) or calls[-1])
     runs = []
     for compiled in (True, False):
         monkeypatch.setattr(kernel_loader, "compiled_paid", lambda c=compiled: c)
@@ -287,15 +283,8 @@ def test_the_passes_in_one_compiled_call_are_the_numpy_passes(seed: int, upper: 
         x = x0.copy()
         repair = R.Repair(st, rnd, free, level_of, None, upper)
         runs.append((repair.run(x, failing), x.tobytes(), repair.moved))
-        assert calls == [compiled]  # the passes' route, by the kernel or not
+        assert [c is not None for c in calls] == [compiled]  # the passes' route
     assert runs[0] == runs[1]
     ok, raw, moved = runs[0]
     assert ok and moved > 0
-    x = np.frombuffer(raw)
-    assert not C._fails(st, rnd, x, free, upper).any()
-    exact = _exact_optimum(mdp, goal, upper)
-    live = np.flatnonzero(~free)
-    if upper:
-        assert all(Fraction(float(x[s])) >= exact[s] for s in live.tolist())
-    else:
-        assert all(Fraction(float(x[s])) <= exact[s] for s in live.tolist())
+    _assert_a_checked_bound(mdp, goal, st, rnd, np.frombuffer(raw), free, upper)
