@@ -141,25 +141,24 @@ def _expression(t: _Tokens) -> Any:
     return cond
 
 
-def _or(t: _Tokens) -> Any:
-    e = _and(t)
-    while t.peek() in ("|", "=>"):
-        e = ("OR" if t.take() == "|" else "IMPLIES", e, _and(t))
+def _left(t: _Tokens, operand: Any, ops: dict[str, str]) -> Any:
+    """Operands of ``operand`` joined by the operators ``ops``, left to right."""
+    e = operand(t)
+    while t.peek() in ops:
+        e = (ops[t.take()], e, operand(t))
     return e
+
+
+def _or(t: _Tokens) -> Any:
+    return _left(t, _and, {"|": "OR", "=>": "IMPLIES"})
 
 
 def _and(t: _Tokens) -> Any:
-    e = _equality(t)
-    while t.accept("&"):
-        e = ("AND", e, _equality(t))
-    return e
+    return _left(t, _equality, {"&": "AND"})
 
 
 def _equality(t: _Tokens) -> Any:
-    e = _relation(t)
-    while t.peek() in ("=", "!="):
-        e = ("EQ" if t.take() == "=" else "NEQ", e, _relation(t))
-    return e
+    return _left(t, _relation, {"=": "EQ", "!=": "NEQ"})
 
 
 def _relation(t: _Tokens) -> Any:
@@ -172,17 +171,11 @@ def _relation(t: _Tokens) -> Any:
 
 
 def _plus(t: _Tokens) -> Any:
-    e = _times(t)
-    while t.peek() in ("+", "-"):
-        e = ("PLUS" if t.take() == "+" else "MINUS", e, _times(t))
-    return e
+    return _left(t, _times, {"+": "PLUS", "-": "MINUS"})
 
 
 def _times(t: _Tokens) -> Any:
-    e = _unary(t)
-    while t.peek() in ("*", "/"):
-        e = ("TIMES" if t.take() == "*" else "DIVIDE", e, _unary(t))
-    return e
+    return _left(t, _unary, {"*": "TIMES", "/": "DIVIDE"})
 
 
 def _unary(t: _Tokens) -> Any:
