@@ -169,6 +169,7 @@ def test_what_the_load_leaves_for_later_is_right_when_asked(tmp_path, monkeypatc
         return prism_bounded.run_capped(work, budget)
 
     monkeypatch.setattr(prism_build, "run_capped", counted)
+    monkeypatch.setenv("MITLD_PRISM_BUILDER", "storm")  # about Storm's build: forced
     prism = tmp_path / "p.prism"
     prism.write_text(PROGRAM, encoding="utf-8")
     game = load_prism(prism, max_states=max_states)
