@@ -20,6 +20,13 @@ pytestmark = pytest.mark.skipif(
     importlib.util.find_spec("stormpy") is None, reason="needs stormpy: pip install -e '.[prism]'"
 )
 
+
+@pytest.fixture(autouse=True)
+def _storms_build(monkeypatch: pytest.MonkeyPatch) -> None:
+    """These tests are about Storm's deferred build (the names and valuations of its
+    second build), which the own parse would otherwise take over."""
+    monkeypatch.setenv("MITLD_PRISM_BUILDER", "storm")
+
 # Unlabelled commands in both modules (overlapping guards, one enabled nowhere), an
 # action both modules synchronise on, an action of one module, and states without an
 # enabled command (x=3: Storm's deadlock self-loop).

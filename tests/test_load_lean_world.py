@@ -146,7 +146,9 @@ def expected_name(cmds: tuple[tuple[str, int], ...], row: list[tuple[Any, ...]])
     return action
 
 
-def test_names_asked_after_a_lean_load_are_storms_with_valuations_on(tmp_path: Path) -> None:
+def test_names_asked_after_a_lean_load_are_storms_with_valuations_on(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("MITLD_PRISM_BUILDER", "storm")  # about Storm's lean load: forced
     path = tmp_path / "named.prism"
     path.write_text(NAMED)
     game = load_prism(path)
