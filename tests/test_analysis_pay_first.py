@@ -40,13 +40,26 @@ def test_the_gate_follows_the_rule(paid: bool, cold: int | None, certificate_pay
         k: i != cold for i, k in enumerate(analysis_gates.ANALYSIS_KERNELS)})
     monkeypatch.setattr(certify_compiled, "load_if_warm",
                         lambda entries: asked.append(entries) or certificate_pays)
-    got = analysis_gates.pay_if_warm(123_456)
+    got = analysis_gates.pay_if_warm(223_456)
     if paid:
         assert got and not asked
     elif cold is not None:
         assert not got and not asked  # a cold kernel: nothing paid, nothing asked
     else:
-        assert got is certificate_pays and asked == [123_456]
+        assert got is certificate_pays and asked == [223_456]
+
+
+@pytest.mark.parametrize("entries", [0, 1_000, 149_999])
+def test_a_small_product_asks_nothing(entries: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    # below the certificate's 150,000 entries nothing is paid, and no kernel's warmth is
+    # looked up (that reads and hashes cache files: the bundled case must not import
+    # hashlib for it)
+    looked: list[str] = []
+    monkeypatch.setattr(kernel_loader, "compiled_paid", lambda: False)
+    monkeypatch.setattr(analysis_gates, "warm", lambda k: looked.append(k) or True)
+    monkeypatch.setattr(certify_compiled, "load_if_warm", lambda n: pytest.fail("asked"))
+    assert analysis_gates.pay_if_warm(entries) is False
+    assert looked == []
 
 
 def test_the_analysis_kernels_include_the_attractor_and_the_levels() -> None:

@@ -138,8 +138,11 @@ def pay_if_warm(entries: int) -> bool:
     same load, earlier).  Only which walk runs changes, not a set, component or number."""
     if kernel_loader.compiled_paid():
         return True
+    from mitld_lp.solvers.certify_compiled import WARM_LOAD_MIN_ENTRIES, load_if_warm
+
+    if entries < WARM_LOAD_MIN_ENTRIES:  # before the warmth checks, which hash files
+        return False
     if not all(warm(k) for k in ANALYSIS_KERNELS):
         return False
-    from mitld_lp.solvers.certify_compiled import load_if_warm
 
     return load_if_warm(entries)
