@@ -47,6 +47,14 @@ state); past it, every entry the components could fill (at most :data:`MAX_ROOM`
 MAX_ROOM = 1 << 25
 """The most factor entries :func:`factor` makes room for (16 bytes each)."""
 
+REFILL = 1024
+"""A chain that fills past its first room is factorised again with all its components
+could fill only where that is at most this many entries (16 KB) a state of the chain;
+else by SciPy's route.  A 2,000-state component that fills densely (4e6 entries, 64 MB
+for a 2,000-state chain) would otherwise hold many times the chain's own bytes for one
+policy's factors (``tests/test_peak_mem.py::test_jump_holds_no_long_double_copy_of_the_block``);
+consensus 4-4's 8,302-state chains with components of 984-1,246 states stay compiled."""
+
 _KERNELS: list[Any] = []  # the kernel module if it is usable, None if not (once)
 
 
@@ -132,7 +140,7 @@ def factor(chain: sp.csr_array, label: np.ndarray, n_comp: int,
             status = int(run.topo_factor(order, bounds, at, indptr, indices, data, start,
                                          diag, fidx, fval, np.zeros(largest),
                                          np.zeros(largest, dtype=np.bool_)))
-            if status != -3 or room >= full or full > MAX_ROOM:
+            if status != -3 or room >= full or full > min(MAX_ROOM, REFILL * k):
                 break
             room = full  # filled past the first room: once more with all of it
         if status == -1:
