@@ -528,11 +528,19 @@ def _too_deep(text: str) -> ParseError:
 
 
 def _depth(f: Formula) -> int:
-    """Nesting depth of ``f`` (a proposition has depth 1), computed without recursion."""
+    """Nesting depth of ``f`` (a proposition has depth 1), computed without recursion.
+
+    The smart constructors share subformulas (``a W b`` holds ``b`` twice), so ``f`` is a
+    DAG whose paths can be exponentially many: a node already reached at a depth at
+    least ``d`` is not walked again (what lies below it adds the same either way)."""
     best = 0
+    seen: dict[int, int] = {}
     stack: list[tuple[Formula, int]] = [(f, 1)]
     while stack:
         g, d = stack.pop()
+        if seen.get(id(g), 0) >= d:
+            continue
+        seen[id(g)] = d
         best = max(best, d)
         match g:
             case Not(a) | Next(a) | Dist(_, a):
