@@ -44,24 +44,18 @@ from mitld_lp.distributions import (
     Family,
 )
 from mitld_lp.logic import tables
+from mitld_lp.logic.depth import formula_depth
 from mitld_lp.logic.plain_parse import plain_source
 from mitld_lp.logic.source import Source, source_of
 from mitld_lp.logic.syntax import (
     FALSE,
     RESERVED,
     TRUE,
-    And,
-    Dist,
     DistRef,
     DistSpec,
     Formula,
     Interval,
-    Next,
-    Not,
-    Or,
     Prop,
-    Release,
-    Until,
     always,
     conj,
     disj,
@@ -527,32 +521,6 @@ def _too_deep(text: str) -> ParseError:
     )
 
 
-def _depth(f: Formula) -> int:
-    """Nesting depth of ``f`` (a proposition has depth 1), computed without recursion.
-
-    The smart constructors share subformulas (``a W b`` holds ``b`` twice), so ``f`` is a
-    DAG whose paths can be exponentially many: a node already reached at a depth at
-    least ``d`` is not walked again (what lies below it adds the same either way)."""
-    best = 0
-    seen: dict[int, int] = {}
-    stack: list[tuple[Formula, int]] = [(f, 1)]
-    while stack:
-        g, d = stack.pop()
-        if seen.get(id(g), 0) >= d:
-            continue
-        seen[id(g)] = d
-        best = max(best, d)
-        match g:
-            case Not(a) | Next(a) | Dist(_, a):
-                stack.append((a, d + 1))
-            case And(args) | Or(args):
-                stack.extend((a, d + 1) for a in args)
-            case Until(left, right, _) | Release(left, right, _):
-                stack.append((left, d + 1))
-                stack.append((right, d + 1))
-    return best
-
-
 def parse(text: str) -> Formula:
     """Parse one MITLD formula; the result is built by the smart constructors, so it is
     in their simplified form and ``parse(str(f)) == f``.
@@ -579,7 +547,7 @@ def parse_source(text: str) -> Source:
     tree, built = _run(text, "start")
     result = built[id(tree)]
     assert isinstance(result, Formula)
-    if _depth(result) > MAX_DEPTH:
+    if formula_depth(result) > MAX_DEPTH:
         raise _too_deep(text)
     try:
         source = source_of(text, tree, built)
@@ -593,8 +561,8 @@ def parse_source(text: str) -> Source:
 def _too_deep_source(source: Source) -> bool:
     """Whether the formula of ``source``, or a law its text writes, nests deeper than
     :data:`MAX_DEPTH`."""
-    return (_depth(source.formula) > MAX_DEPTH
-            or any(_depth(site.dist) > MAX_DEPTH for site in source.laws))
+    return (formula_depth(source.formula) > MAX_DEPTH
+            or any(formula_depth(site.dist) > MAX_DEPTH for site in source.laws))
 
 
 def parse_distribution(text: str) -> DistSpec:
