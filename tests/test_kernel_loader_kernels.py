@@ -18,7 +18,7 @@ from scipy.sparse.csgraph import connected_components
 pytest.importorskip("numba")
 
 from mitld_lp.solvers import compiled_graph
-from mitld_lp.util import kernel_files, kernel_loader  # noqa: E402
+from mitld_lp.util import kernel_loader  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -117,24 +117,25 @@ def test_end_components_loaded_equal_numba_and_brute_force() -> None:
         np.testing.assert_array_equal(alive, keep[cand])
 
 
-def _file_of(kernel: kernel_loader.Kernel, args: tuple) -> Path:
-    key = kernel_loader.type_key(args)
-    name = kernel_files.file_name(kernel.py_func.__code__.co_filename, kernel.__qualname__, key)
-    for directory in kernel_files.directories(kernel.py_func.__code__.co_filename):
-        if (directory / name).is_file():
-            return directory / name
-    raise AssertionError("no cache file")
+DAMAGE_CHILD = r"""
+import json, marshal, sys
+import numpy as np, scipy.sparse as sp
+from mitld_lp.solvers import compiled_graph
+from mitld_lp.util import kernel_files, kernel_loader
 
-
-@pytest.mark.parametrize("damage", ["flip", "truncate", "foreign", "garbage", "callee"])
-def test_damaged_or_foreign_file_falls_back_and_is_rewritten(damage: str) -> None:
-    kernel = compiled_graph.strong_components
-    rng = np.random.default_rng(3)
-    ptr, succ = _graph(rng, 60, 0.04)
-    args = (ptr, succ, np.bool_(False))
-    expected = kernel.numba_dispatcher()(*args)
-    _linked(kernel, args)
-    path = _file_of(kernel, args)
+kernel = compiled_graph.strong_components
+rng = np.random.default_rng(3)
+g = sp.csr_array((rng.random((60, 60)) < 0.04).astype(np.int8))
+args = (g.indptr.astype(np.int64), g.indices.astype(np.int64), np.bool_(False))
+key = kernel_loader.type_key(args)
+expected = kernel.numba_dispatcher()(*args)
+kernel(*args)  # numba's call writes the file
+py_file = kernel.py_func.__code__.co_filename
+name = kernel_files.file_name(py_file, kernel.__qualname__, key)
+(path,) = [d / name for d in kernel_files.directories(py_file) if (d / name).is_file()]
+out = {"folder": str(path.parent)}
+for damage in sys.argv[1:]:
+    kernel._calls.pop(key, None)
     data = path.read_bytes()
     meta, obj = kernel_files.unpack(data)
     if damage == "flip":
@@ -146,24 +147,41 @@ def test_damaged_or_foreign_file_falls_back_and_is_rewritten(damage: str) -> Non
     elif damage == "garbage":
         bad = b"not a cache file"
     elif damage == "callee":  # a kernel of another module compiled in, since changed
-        import marshal
-
         other = dict(meta, sources=(("mitld_lp.solvers.level_kernels", "0" * 64),))
         bad = kernel_files.pack(marshal.dumps(other), obj)
     else:  # a whole, well-formed file for another numba / CPU
-        import marshal
-
         other = dict(meta, key=meta["key"].replace(b"x86_64", b"aarch64"))
         bad = kernel_files.pack(marshal.dumps(other), obj)
+    good_before = kernel_loader._load(kernel, key) is not None
     path.write_bytes(bad)
-    key = kernel_loader.type_key(args)
-    assert kernel_loader._load(kernel, key) is None
+    refused = kernel_loader._load(kernel, key) is None
     kernel._calls.pop(key, None)  # as in a fresh process
     got = kernel(*args)  # numba's call, the file written again
-    assert got[0] == expected[0]
-    np.testing.assert_array_equal(got[1], expected[1])
-    assert path.read_bytes() != bad
-    assert kernel_loader._load(kernel, key) is not None
+    out[damage] = {"good_before": good_before, "refused": refused,
+                   "n": bool(got[0] == expected[0]),
+                   "labels": bool(np.array_equal(got[1], expected[1])),
+                   "rewritten": path.read_bytes() != bad,
+                   "linked_after": kernel_loader._load(kernel, key) is not None}
+print(json.dumps(out))
+"""
+
+
+def test_damaged_or_foreign_file_falls_back_and_is_rewritten(tmp_path: Path) -> None:
+    """Each damage to a cache file: refused, numba's call gives the same arrays, and the
+    file is written again and links.  In a child process with a cache folder of its own
+    (``NUMBA_CACHE_DIR``): damaging the shared cache file raced other test processes
+    that read it (one linked numba's call instead, another found it half written)."""
+    damages = ["flip", "truncate", "foreign", "garbage", "callee"]
+    env = dict(os.environ, PYTHONPATH=str(ROOT), NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    done = subprocess.run([sys.executable, "-c", DAMAGE_CHILD, *damages],
+                          capture_output=True, text=True, env=env, cwd=str(tmp_path))
+    assert done.returncode == 0, done.stderr[-3000:]
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    assert Path(out["folder"]).is_relative_to(tmp_path / "cache")
+    for damage in damages:
+        assert out[damage] == {"good_before": True, "refused": True, "n": True,
+                               "labels": True, "rewritten": True,
+                               "linked_after": True}, damage
 
 
 CHILD = r"""
