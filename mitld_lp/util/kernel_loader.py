@@ -62,6 +62,7 @@ from typing import Any
 import numpy as np
 
 from mitld_lp.util import elf_link, elf_runtime, kernel_files, kernel_sources
+from mitld_lp.util.kernel_types import type_key
 
 __all__ = ["ENABLED", "Kernel", "LazyNumba", "lazy_numba", "loaded_count", "type_key"]
 
@@ -272,38 +273,28 @@ class Kernel:
         return (bool(self.options.get("cache")) and self.py_func.__closure__ is None
                 and not self.options.get("parallel"))
 
+    def compile_for(self, args: tuple) -> bool:
+        """Make the signature of ``args`` linkable from the cache without running the
+        kernel (``mitld-lp warm``): numba's compile (or its cache) and this module's
+        cache file, as a call's miss writes them.  False where the loader links it
+        already (nothing compiled)."""
+        key = type_key(args) if ENABLED and self.cacheable() else None
+        with _lock:
+            if key is not None and self._calls.get(key, _UNSET) is _UNSET:
+                self._calls[key] = _load(self, key)
+            if key is not None and self._calls[key] is not None:
+                return False
+            dispatcher = self.numba_dispatcher()
+            if (self.__module__, self.__qualname__) in kernel_sources.STALE:
+                kernel_sources.flush_numba_cache(self, dispatcher)
+            dispatcher.compile(tuple(dispatcher.typeof_pyval(a) for a in args))
+            if key is not None:
+                _store(self, key, args, dispatcher)
+                self._calls[key] = dispatcher
+        return True
+
 
 _UNSET = object()
-
-
-def type_key(args: tuple) -> tuple | None:
-    """numba's type of each argument as NumPy gives it (``numba.typeof``'s inputs: an
-    array's dtype, dimensions, layout C / F / A, read-only and aligned flags; a Python
-    bool, int (int64) or float; a NumPy scalar's dtype), or None for anything else
-    (numba's dispatcher then decides)."""
-    out: list[tuple] = []
-    for a in args:
-        t = type(a)
-        if t is np.ndarray:
-            dt = a.dtype
-            if dt.kind not in "biufc" or not dt.isnative or dt.fields is not None:
-                return None
-            f = a.flags
-            layout = "C" if f.c_contiguous else "F" if f.f_contiguous else "A"
-            out.append(("array", dt.str, a.ndim, layout, not f.writeable, f.aligned))
-        elif t is bool or t is np.bool_:
-            out.append((t.__name__,))
-        elif t is int:
-            if not -(2 ** 63) <= a < 2 ** 63:
-                return None
-            out.append(("int",))
-        elif t is float:
-            out.append(("float",))
-        elif isinstance(a, np.generic) and a.dtype.kind in "iuf" and a.dtype.isnative:
-            out.append(("scalar", a.dtype.str))
-        else:
-            return None
-    return tuple(out)
 
 
 # --- the run-time pieces: numba's extension modules, llvmlite's linker ------------------
