@@ -92,7 +92,7 @@ _VERBS: list[
      _verb("run", "args_run"), _verb("run", "cmd_run")),
     ("pareto", "the certified curve of success probability against steps, cost or a risk",
      _verb("constrained", "args_pareto"), _verb("constrained", "cmd_pareto")),
-    ("warm", "compile the own PRISM explorer once on this machine (faster PRISM loads)",
+    ("warm", "compile the PRISM explorer and the solve's kernels once on this machine",
      _verb("warm", "args_warm"), _verb("warm", "cmd_warm")),
 ]
 

@@ -3,7 +3,10 @@ kernels (:mod:`mitld_lp.worlds.prism_explore`), which a PRISM or JANI load uses 
 where their machine code is cached already; until then Storm's explicit builder builds
 every PRISM world (the same tables, slower).  Also the lifted policy's kernel
 (:mod:`mitld_lp.solvers.lift_kernels`), which a solve uses only where it is cached
-(until then the NumPy search: the same choices)."""
+(until then the NumPy search: the same choices).  Then every other kernel signature a
+solve may link (:data:`mitld_lp.util.warm_kernels.SIGNATURES`: the analysis's, the
+iteration's, the certificate's, the quotient's, the LP's lift, the step-bounded and the
+sensed routes'), which a first solve on a machine compiled otherwise (seconds each)."""
 
 from __future__ import annotations
 
@@ -40,7 +43,25 @@ def cmd_warm(args: argparse.Namespace) -> int:
         say_answer(f"compiled the policy jump's chain kernels in "
                    f"{time.process_time() - start:.1f} s of CPU")
     _warm_lift()
+    _warm_solve(args)
     return EXIT_OK
+
+
+def _warm_solve(args: argparse.Namespace) -> None:
+    """Compile (or find cached) every listed signature of the solve's kernels; say how
+    many were compiled and the CPU it took."""
+    from mitld_lp.util import warm_kernels
+
+    if not args.quiet:
+        say("the solve's kernels: compiling those not cached (minutes of CPU, once)")
+    compiled, listed, cpu = warm_kernels.compile_all()
+    if not listed:
+        say_answer("numba is not installed: the solve runs its NumPy routes")
+    elif compiled:
+        say_answer(f"compiled {compiled} of the solve's {listed} kernel signatures in "
+                   f"{cpu:.1f} s of CPU; a first solve now links them from the cache")
+    else:
+        say_answer(f"the solve's {listed} kernel signatures were compiled already")
 
 
 def _warm_lift() -> None:
