@@ -42,6 +42,9 @@ def test_warm_program_builds_its_six_states(tmp_path):
 
 
 def test_warm_says_what_it_did(monkeypatch, capsys):
+    from mitld_lp.util import warm_kernels  # the solve's kernels: tests/test_warm_*.py
+
+    monkeypatch.setattr(warm_kernels, "compile_all", lambda *a: (0, 43, 0.0))
     prism_explore.compile_kernels(stormpy)  # cached from here (compiled once if cold)
     assert main(["warm"]) == 0
     assert "compiled already" in capsys.readouterr().out

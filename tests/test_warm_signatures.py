@@ -187,3 +187,27 @@ def test_compile_for_writes_a_file_a_later_process_links(tmp_path):
     # state 0 (inside) and to state 1 with a stored zero (no edge): row 1 is the first
     # that stays
     assert linked == {"got": [1], "loaded": 1, "numba": False}
+
+
+@pytest.mark.parametrize(("done", "said"), [
+    ((3, 43, 1.25), "compiled 3 of the solve's 43 kernel signatures in 1.2 s of CPU"),
+    ((0, 43, 0.01), "the solve's 43 kernel signatures were compiled already"),
+    ((0, 0, 0.0), "numba is not installed: the solve runs its NumPy routes"),
+])
+def test_warm_says_how_many_signatures_it_compiled(monkeypatch, capsys, done, said):
+    pytest.importorskip("stormpy")
+    from mitld_lp.cli import main
+    from mitld_lp.solvers import lift_kernels, topo_chain
+    from mitld_lp.worlds import prism_explore
+
+    monkeypatch.setattr(prism_explore, "kernel_ready", lambda: True)
+    monkeypatch.setattr(prism_explore, "compile_kernels", lambda *_: False)
+    monkeypatch.setattr(topo_chain, "compile_kernels", lambda: False)
+    monkeypatch.setattr(lift_kernels, "warm_up", lambda: None)
+    monkeypatch.setattr(warm_kernels, "compile_all", lambda *_: done)
+    assert main(["warm"]) == 0
+    out = capsys.readouterr()
+    assert said in out.out
+    assert "the solve's kernels: compiling those not cached" in out.err
+    assert main(["warm", "-q"]) == 0
+    assert capsys.readouterr().err == ""
