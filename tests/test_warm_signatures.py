@@ -97,6 +97,7 @@ LOWERED = {
     "mitld_lp.sensing.rows": ["COMPILED_MIN_STATES", "COMPILED_MIN_ESTIMATE"],
     "mitld_lp.product.table_levels": ["COMPILED_MIN_STATES", "COLD_MIN_STATES"],
     "mitld_lp.worlds.prism_build": ["OWN_FROM_STATES"],
+    "mitld_lp.routes.horizon": ["CLAIM_FROM"],
 }
 for name, attrs in LOWERED.items():
     module = importlib.import_module(name)
@@ -132,10 +133,10 @@ def test_every_kernel_small_solves_call_is_listed(tmp_path):
                           env=env, cwd=str(tmp_path), timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     called = {tuple(c) for c in json.loads(done.stdout.strip().splitlines()[-1])}
-    reached = {m.rsplit(".", 1)[1] for m, _, _ in called}
+    reached = {m.rsplit(".", 1)[1] for m, _, _ in called}  # the gates forced on:
     assert reached >= {"kernels", "group_kernels", "compiled_graph", "certify_kernels",
                        "certify_repair_kernels", "level_kernels", "quotient_kernels",
-                       "greedy_kernels", "prism_kernels"}, reached  # the gates forced on
+                       "greedy_kernels", "prism_kernels", "horizon_kernels"}, reached
     listed = {(m, n, warm_kernels.encode(k)) for m, n, k in warm_kernels.signatures()}
     assert not {c for c in called if c[2] == "?"}, "a call the loader cannot key"
     assert called - listed == set(), "not in warm_kernels.SIGNATURES (add them)"

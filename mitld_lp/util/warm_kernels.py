@@ -137,6 +137,19 @@ SIGNATURES: dict[str, dict[str, tuple[str, ...]]] = {
             "i4/1C i4/1C f8/1C i8/1C f8/1C f8/1C bool",
         ),
     },
+    "mitld_lp.solvers.horizon_kernels": {
+        "distances": (
+            "int i8/1C b1/1C i8/1C i8/1C i8/1C bool",
+        ),
+        "reach_steps": (
+            "int int int i8/1C i8/1C i8/1C i8/1C i8/1C i8/1C f8/1C i4/1C/ro f8/1C/ro f8/1C/ro "
+            "f8/1C/ro f8/1C f8/1C f8/1C f8/1C bool b1/1C u1/1C i8/1C",
+            "int int int i8/1C i8/1C i8/1C i8/1C i8/1C i8/1C f8/1C i4/1C/ro f8/1C/ro f8/1C/ro "
+            "f8/1C/ro f8/1C f8/1C f8/1C f8/1C bool b1/1C u2/1C i8/1C",
+            "int int int i8/1C i8/1C i8/1C i8/1C i8/1C i8/1C f8/1C i4/1C/ro f8/1C/ro f8/1C/ro "
+            "f8/1C/ro f8/1C f8/1C f8/1C f8/1C bool b1/1C u4/1C i8/1C",
+        ),
+    },
     "mitld_lp.solvers.level_kernels": {
         "chain_flow": (
             "i8/1C i4/1C i4/1C f8/1C f8/1C/ro f8/2C",
