@@ -172,8 +172,8 @@ def test_folded_solve_brackets_value_iteration(seed: int, sense: str,
     made = []
     held = _Folding.held
 
-    def spy(self, it, lp):
-        out = held(self, it, lp)
+    def spy(self, it, lp, whole=()):
+        out = held(self, it, lp, whole)
         made.append(bool(out[2]) and all(f.whole is None for f in out[2].values()))
         return out
 
