@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from mitld_lp.problem import Settings
+from mitld_lp.routes import plain
 from mitld_lp.routes.acceptance import Acceptance
 from mitld_lp.routes.plain import _Folding, solve_models
 from mitld_lp.solvers.analysis import analyse
@@ -178,6 +179,7 @@ def test_folded_solve_brackets_value_iteration(seed: int, sense: str,
         return out
 
     monkeypatch.setattr(_Folding, "held", spy)
+    monkeypatch.setattr(plain, "FOLD_FROM_TRANSITIONS", 0)  # held folded whatever the size
     first, second = solve_models(mdp, Acceptance(np.asarray(mdp.target), None),
                                  Settings(), time.perf_counter(), sense)
     assert made and all(made)  # every model's vectors were held folded
@@ -189,3 +191,61 @@ def test_folded_solve_brackets_value_iteration(seed: int, sense: str,
         assert np.all(it.lower <= want + 1e-9), sol.which
         assert np.all(want <= it.upper + 1e-9), sol.which
         assert sol.certified
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    return np.asarray(a, dtype=np.float64).view(np.uint64)
+
+
+@pytest.mark.parametrize("sense", ["max", "min"])
+@pytest.mark.parametrize("truncated", [False, True])
+def test_held_whole_or_folded_the_same_answer(sense: str, truncated: bool,
+                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    """Below FOLD_FROM_TRANSITIONS nothing is folded; above it, with one model (nothing
+    truncated), the vectors its certificate reads are held whole (the lower bound, and a
+    maximum's upper one) and the rest folded; with two, everything folded.  Every way
+    gives the same records, policy and certified bounds to the bit, and those bracket
+    value iteration's optimum (written in the test)."""
+    mdp = random_mdp(600, seed=7, locality=8, sink_fraction=0.15,
+                     self_loop_fraction=0.3, target_fraction=0.1)
+    if truncated:
+        sink = np.asarray(mdp.sink).copy()
+        cut = sink & (np.arange(sink.size) % 3 == 0)
+        mdp = replace(mdp, sink=sink & ~cut, truncated=cut)
+    target = np.asarray(mdp.target)
+    whole_kept: list[dict[str, bool]] = []
+    held = _Folding.held
+
+    def spy(self, it, lp, whole=()):
+        out = held(self, it, lp, whole)
+        # a vector is held whole where nothing was folded or its record is whole
+        whole_kept.append({k: not out[2] or out[2][k].whole is not None
+                           for k in ("lower", "upper")})
+        return out
+
+    monkeypatch.setattr(_Folding, "held", spy)
+    runs = []
+    for fold_from in (10**18, 0):
+        monkeypatch.setattr(plain, "FOLD_FROM_TRANSITIONS", fold_from)
+        runs.append(solve_models(mdp, Acceptance(target, None), Settings(),
+                                 time.perf_counter(), sense))
+    assert len(whole_kept) == (2 if truncated else 1)  # held only when folding is on
+    if not truncated:
+        read = {"lower", "upper"} if sense == "max" else {"lower"}
+        assert {k for k, w in whole_kept[0].items() if w} >= read
+    else:  # each model's held folded through the other's certificate
+        assert not any(any(w.values()) for w in whole_kept)
+    for unfolded, folded in zip(runs[0], runs[1], strict=True):
+        assert unfolded.which == folded.which
+        np.testing.assert_array_equal(unfolded.policy, folded.policy)
+        for a, b in ((unfolded.iteration.lower, folded.iteration.lower),
+                     (unfolded.iteration.upper, folded.iteration.upper),
+                     (unfolded.policy_values, folded.policy_values)):
+            np.testing.assert_array_equal(_bits(a), _bits(b))
+        assert _bits(np.array(unfolded.bounds)).tolist() == _bits(
+            np.array(folded.bounds)).tolist()
+        goal = target | np.asarray(mdp.truncated) if folded.which == "upper" else target
+        want = _value_iteration(mdp, goal, sense)
+        assert np.all(folded.iteration.lower <= want + 1e-9)
+        assert np.all(want <= folded.iteration.upper + 1e-9)
+        assert folded.certified and unfolded.certified
