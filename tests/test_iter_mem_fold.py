@@ -173,8 +173,8 @@ def test_folded_solve_brackets_value_iteration(seed: int, sense: str,
     made = []
     held = _Folding.held
 
-    def spy(self, it, lp, whole=()):
-        out = held(self, it, lp, whole)
+    def spy(self, it, lp):
+        out = held(self, it, lp)
         made.append(bool(out[2]) and all(f.whole is None for f in out[2].values()))
         return out
 
@@ -201,11 +201,10 @@ def _bits(a: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize("truncated", [False, True])
 def test_held_whole_or_folded_the_same_answer(sense: str, truncated: bool,
                                               monkeypatch: pytest.MonkeyPatch) -> None:
-    """Below FOLD_FROM_TRANSITIONS nothing is folded; above it, with one model (nothing
-    truncated), the vectors its certificate reads are held whole (the lower bound, and a
-    maximum's upper one) and the rest folded; with two, everything folded.  Every way
-    gives the same records, policy and certified bounds to the bit, and those bracket
-    value iteration's optimum (written in the test)."""
+    """Below FOLD_FROM_TRANSITIONS nothing is folded (no fold is made); from it, the
+    vectors are held folded.  Both ways give the same records, policy and certified
+    bounds to the bit, and those bracket value iteration's optimum (written in the
+    test)."""
     mdp = random_mdp(600, seed=7, locality=8, sink_fraction=0.15,
                      self_loop_fraction=0.3, target_fraction=0.1)
     if truncated:
@@ -213,14 +212,12 @@ def test_held_whole_or_folded_the_same_answer(sense: str, truncated: bool,
         cut = sink & (np.arange(sink.size) % 3 == 0)
         mdp = replace(mdp, sink=sink & ~cut, truncated=cut)
     target = np.asarray(mdp.target)
-    whole_kept: list[dict[str, bool]] = []
+    folds: list[bool] = []
     held = _Folding.held
 
-    def spy(self, it, lp, whole=()):
-        out = held(self, it, lp, whole)
-        # a vector is held whole where nothing was folded or its record is whole
-        whole_kept.append({k: not out[2] or out[2][k].whole is not None
-                           for k in ("lower", "upper")})
+    def spy(self, it, lp):
+        out = held(self, it, lp)
+        folds.append(bool(out[2]) and all(f.whole is None for f in out[2].values()))
         return out
 
     monkeypatch.setattr(_Folding, "held", spy)
@@ -229,12 +226,8 @@ def test_held_whole_or_folded_the_same_answer(sense: str, truncated: bool,
         monkeypatch.setattr(plain, "FOLD_FROM_TRANSITIONS", fold_from)
         runs.append(solve_models(mdp, Acceptance(target, None), Settings(),
                                  time.perf_counter(), sense))
-    assert len(whole_kept) == (2 if truncated else 1)  # held only when folding is on
-    if not truncated:
-        read = {"lower", "upper"} if sense == "max" else {"lower"}
-        assert {k for k, w in whole_kept[0].items() if w} >= read
-    else:  # each model's held folded through the other's certificate
-        assert not any(any(w.values()) for w in whole_kept)
+    # held (and so folded) only when folding is on: once a model
+    assert len(folds) == (2 if truncated else 1) and all(folds)
     for unfolded, folded in zip(runs[0], runs[1], strict=True):
         assert unfolded.which == folded.which
         np.testing.assert_array_equal(unfolded.policy, folded.policy)

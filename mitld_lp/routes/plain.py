@@ -277,19 +277,15 @@ class _Folding:
             return _Folded(x)
         return _Folded(None, reduced, at, np.asarray(x)[at], self.state_map, self.one)
 
-    def held(self, it: IterationResult, lp: LPResult | None, whole: tuple[str, ...] = (),
+    def held(self, it: IterationResult, lp: LPResult | None,
              ) -> tuple[IterationResult, LPResult | None, dict[str, _Folded]]:
         """The records without their lifted vectors, and those folded (:meth:`fold`),
-        where folding saves more than the state map it keeps; else as they are.
-        ``whole``: the vectors held as they are, unfolded (those the model's own
-        certificate reads when no other model's certificate runs while they are held:
-        it would lift them back at once, :func:`_read_by_certificate`)."""
+        where folding saves more than the state map it keeps; else as they are."""
         vectors = {"lower": it.lower, "upper": it.upper}
         if lp is not None and lp.values is not None:
             vectors["values"] = lp.values
         folded = {k: self.fold(np.asarray(v, dtype=np.float64)) if
-                  k not in whole and np.asarray(v).dtype == np.float64
-                  and v.shape == self.state_map.shape
+                  np.asarray(v).dtype == np.float64 and v.shape == self.state_map.shape
                   else _Folded(v) for k, v in vectors.items()}
         saved = sum(v.nbytes - (0 if f.whole is None else f.whole.nbytes) -
                     (0 if f.reduced is None else f.reduced.nbytes + 16 * f.at.size)
@@ -313,18 +309,6 @@ def _read_by_certificate(it: IterationResult, folded: dict[str, _Folded], sense:
         return it.lower, it.upper
     return (folded["lower"].unfold(),
             folded["upper"].unfold() if sense == "max" else None)
-
-
-def _read_alone(quotients: list[Quotient], q: Quotient) -> tuple[str, ...]:
-    """The vectors of ``q``'s model not worth folding: with one model (nothing
-    truncated), those its certificate reads (:func:`_read_by_certificate`), which no other
-    certificate runs beside: folded, they were lifted back for it at once and again after
-    it, three gathers over the product's states each (QVBS csma 4-2, 600,267 states:
-    about 4 ms a gather) for no smaller peak, the lifted copy held through the
-    certificate either way."""
-    if len(quotients) > 1:
-        return ()
-    return ("lower", "upper") if str(q.qualitative.sense) == "max" else ("lower",)
 
 
 def _unfolded(sol: ModelSolution, folded: dict[str, _Folded]) -> ModelSolution:
@@ -436,8 +420,8 @@ def solve_models(mdp: MDP, accept: Acceptance, s: Settings, t0: float,
     # the lifted bounds (a float a product state each: the iteration's two, the LP's
     # values) held through the certificates as their quotient's values where that is
     # smaller, each lifted back only while a certificate reads it, all of them after
-    held = [_Folding.of(q).held(it, lp, _read_alone(quotients, q))
-            if mdp.n_transitions >= FOLD_FROM_TRANSITIONS else (it, lp, {})
+    held = [_Folding.of(q).held(it, lp) if mdp.n_transitions >= FOLD_FROM_TRANSITIONS
+            else (it, lp, {})
             for q, it, lp in zip(quotients, its, lps, strict=True)]
     del quotients, its, lps
     eta = ETA if eta is None else eta
