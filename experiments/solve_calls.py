@@ -68,6 +68,11 @@ def child(job: dict[str, Any]) -> dict[str, Any]:
                 bracket=[r.lower, r.upper], rows=rows)
 
 
+def _answer(work: Path) -> None:
+    job = json.loads((work / "job.json").read_text(encoding="utf-8"))
+    (work / "out.json").write_text(json.dumps(child(job)), encoding="utf-8")
+
+
 def main(argv: list[str] | None = None) -> None:
     import bench_qvbs as bq
 
@@ -80,10 +85,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--out", type=Path, default=HERE / "out")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    if args.child is not None:
-        work = Path(args.child)
-        job = json.loads((work / "job.json").read_text(encoding="utf-8"))
-        (work / "out.json").write_text(json.dumps(child(job)), encoding="utf-8")
+    if args.child is not None:  # the child's side: its job read, its answer written
+        _answer(Path(args.child))
         return
     names = [QUICK] if args.quick else args.only
     reps = 1 if args.quick else args.reps
