@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -100,8 +101,11 @@ def main(argv: list[str] | None = None) -> None:
                 raise SystemExit(f"--only: {name} is not a QVBS instance posed here")
             job = dict(jobs[name], reps=reps, min_ms=args.min_ms)
             (work / "job.json").write_text(json.dumps(job), encoding="utf-8")
+            # the child imports this checkout's package, wherever it is run from
+            env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+                [str(HERE.parent), *filter(None, [os.environ.get("PYTHONPATH")])]))
             subprocess.run([sys.executable, __file__, "--qvbs", str(args.qvbs), "--child",
-                            str(work)], check=True)
+                            str(work)], check=True, env=env)
             got = json.loads((work / "out.json").read_text(encoding="utf-8"))
             lo, hi = got["bracket"]
             lines += [f"### {name}: [{lo!r}, {hi!r}]", "",
