@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from mitld_lp.problem import Settings
+from mitld_lp.routes import plain
 from mitld_lp.routes.acceptance import Acceptance
 from mitld_lp.routes.plain import _Folding, solve_models
 from mitld_lp.solvers.analysis import analyse
@@ -178,6 +179,7 @@ def test_folded_solve_brackets_value_iteration(seed: int, sense: str,
         return out
 
     monkeypatch.setattr(_Folding, "held", spy)
+    monkeypatch.setattr(plain, "FOLD_FROM_TRANSITIONS", 0)  # held folded whatever the size
     first, second = solve_models(mdp, Acceptance(np.asarray(mdp.target), None),
                                  Settings(), time.perf_counter(), sense)
     assert made and all(made)  # every model's vectors were held folded
@@ -189,3 +191,54 @@ def test_folded_solve_brackets_value_iteration(seed: int, sense: str,
         assert np.all(it.lower <= want + 1e-9), sol.which
         assert np.all(want <= it.upper + 1e-9), sol.which
         assert sol.certified
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    return np.asarray(a, dtype=np.float64).view(np.uint64)
+
+
+@pytest.mark.parametrize("sense", ["max", "min"])
+@pytest.mark.parametrize("truncated", [False, True])
+def test_held_whole_or_folded_the_same_answer(sense: str, truncated: bool,
+                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    """Below FOLD_FROM_TRANSITIONS nothing is folded (no fold is made); from it, the
+    vectors are held folded.  Both ways give the same records, policy and certified
+    bounds to the bit, and those bracket value iteration's optimum (written in the
+    test)."""
+    mdp = random_mdp(600, seed=7, locality=8, sink_fraction=0.15,
+                     self_loop_fraction=0.3, target_fraction=0.1)
+    if truncated:
+        sink = np.asarray(mdp.sink).copy()
+        cut = sink & (np.arange(sink.size) % 3 == 0)
+        mdp = replace(mdp, sink=sink & ~cut, truncated=cut)
+    target = np.asarray(mdp.target)
+    folds: list[bool] = []
+    held = _Folding.held
+
+    def spy(self, it, lp):
+        out = held(self, it, lp)
+        folds.append(bool(out[2]) and all(f.whole is None for f in out[2].values()))
+        return out
+
+    monkeypatch.setattr(_Folding, "held", spy)
+    runs = []
+    for fold_from in (10**18, 0):
+        monkeypatch.setattr(plain, "FOLD_FROM_TRANSITIONS", fold_from)
+        runs.append(solve_models(mdp, Acceptance(target, None), Settings(),
+                                 time.perf_counter(), sense))
+    # held (and so folded) only when folding is on: once a model
+    assert len(folds) == (2 if truncated else 1) and all(folds)
+    for unfolded, folded in zip(runs[0], runs[1], strict=True):
+        assert unfolded.which == folded.which
+        np.testing.assert_array_equal(unfolded.policy, folded.policy)
+        for a, b in ((unfolded.iteration.lower, folded.iteration.lower),
+                     (unfolded.iteration.upper, folded.iteration.upper),
+                     (unfolded.policy_values, folded.policy_values)):
+            np.testing.assert_array_equal(_bits(a), _bits(b))
+        assert _bits(np.array(unfolded.bounds)).tolist() == _bits(
+            np.array(folded.bounds)).tolist()
+        goal = target | np.asarray(mdp.truncated) if folded.which == "upper" else target
+        want = _value_iteration(mdp, goal, sense)
+        assert np.all(folded.iteration.lower <= want + 1e-9)
+        assert np.all(want <= folded.iteration.upper + 1e-9)
+        assert folded.certified and unfolded.certified

@@ -52,7 +52,7 @@ if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package
     from mitld_lp.solvers.result import IterationResult, LPResult, Status
 
 __all__ = ["PlainRoute", "PlainPart", "ModelSolution", "solve_models", "solve_plain",
-           "TRIM_BEFORE_LP_FROM", "TRIM_FROM_TRANSITIONS"]
+           "FOLD_FROM_TRANSITIONS", "TRIM_BEFORE_LP_FROM", "TRIM_FROM_TRANSITIONS"]
 
 log = logging.getLogger(__name__)
 
@@ -72,6 +72,14 @@ TRIM_FROM_TRANSITIONS = 1_000_000
 #: check instead (46.2-46.7, two trims) was dearer, one before the flow alone (49.3-50.8)
 #: saved too little.
 TRIM_BEFORE_LP_FROM = TRIM_FROM_TRANSITIONS
+
+#: The product size from which the lifted bounds are held folded through the
+#: certificates (:class:`_Folding`): the builder's threshold, for the same reason (below
+#: it the process's heap is tens of megabytes, and the bytes-a-transition target is read
+#: from a million transitions).  A fold and its unfold are two gathers over the product's
+#: states a vector: QVBS firewire_dl 3-600 (197,013 transitions) spent 3-4 ms of its
+#: 0.08 s solve on them (profiled), to hold 2.7 MB less through its certificate.
+FOLD_FROM_TRANSITIONS = TRIM_FROM_TRANSITIONS
 
 @dataclass(frozen=True, slots=True, eq=False)
 class ModelSolution:
@@ -412,7 +420,9 @@ def solve_models(mdp: MDP, accept: Acceptance, s: Settings, t0: float,
     # the lifted bounds (a float a product state each: the iteration's two, the LP's
     # values) held through the certificates as their quotient's values where that is
     # smaller, each lifted back only while a certificate reads it, all of them after
-    held = [_Folding.of(q).held(it, lp) for q, it, lp in zip(quotients, its, lps, strict=True)]
+    held = [_Folding.of(q).held(it, lp) if mdp.n_transitions >= FOLD_FROM_TRANSITIONS
+            else (it, lp, {})
+            for q, it, lp in zip(quotients, its, lps, strict=True)]
     del quotients, its, lps
     eta = ETA if eta is None else eta
     solutions = []
