@@ -12,18 +12,20 @@ queries, other filters, reward bounds, LTL, functions, a name it does not know, 
 that does not parse: Storm's answer or refusal is then today's, word for word).
 
 :func:`symbols_of_storm` builds the :class:`Symbols` of a Storm PRISM program (its
-definitions are Storm's printing); a reader of the PRISM text can build them from its
-own parse (definitions as written, ``storm_printed=False``).
+definitions are Storm's printing); :func:`mitld_lp.worlds.prism_symbols.own_symbols`
+builds the same record from our own parse of the PRISM text, printed as Storm prints
+it, so that a file the own parse takes is read without stormpy.
 """
 
 from __future__ import annotations
 
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any
 
+from mitld_lp.worlds.prism_symbols import Symbols
 from mitld_lp.worlds.properties import (
     PropertyError,
     Query,
@@ -40,29 +42,6 @@ from mitld_lp.worlds.property_parse import (
 
 __all__ = ["Symbols", "OwnProperty", "symbols_of_storm", "symbols_of", "read_own", "read_any",
            "print_formula"]
-
-
-@dataclass(frozen=True)
-class Symbols:
-    """What a property reads of its program.
-
-    Attributes:
-        labels: ``name -> expression text`` of the file's labels.
-        constants: ``name -> (kind, definition text or None)`` (kind ``int``,
-            ``double``, ``bool``; None: the file leaves it open).
-        variables: ``name -> kind`` (``int`` or ``bool``).
-        formulas: ``name -> expression text`` (a name used and absent here is
-            declined, so a reader may leave them out).
-        chain: the file is a DTMC.
-        storm_printed: the definition texts are Storm's printing (``1/2`` a number).
-    """
-
-    labels: Mapping[str, str]
-    constants: Mapping[str, tuple[str, str | None]]
-    variables: Mapping[str, str]
-    formulas: Mapping[str, str] = field(default_factory=dict)
-    chain: bool = False
-    storm_printed: bool = False
 
 
 def symbols_of_storm(program: Any, labels: Mapping[str, str], *,
@@ -93,6 +72,8 @@ def symbols_of(program: Any) -> Symbols | None:
     properties)."""
     if program.jani:
         return None
+    if program.symbols is not None:  # our own parse's (prism_symbols): no stormpy
+        return program.symbols
     try:
         return symbols_of_storm(program.program, program.labels, chain=program.chain)
     except Decline:
