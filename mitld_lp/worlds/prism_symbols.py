@@ -23,7 +23,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from fractions import Fraction
 from typing import Any
 
 from mitld_lp.worlds.prism_expr import (
@@ -71,37 +70,29 @@ _SYMBOL = {"PLUS": "+", "MINUS": "-", "TIMES": "*", "DIVIDE": "/", "AND": "&", "
            "IMPLIES": "=>", "IFF": "<=>", "XOR": "!=", "EQUAL": "=", "NOT_EQUAL": "!=",
            "LESS": "<", "LESS_OR_EQUAL": "<=", "GREATER": ">", "GREATER_OR_EQUAL": ">=",
            "MODULO": "%"}
+_FORMS = {"NOT": "!({0})", "ITE": "({0} ? {1} : {2})", "FLOOR": "floor({0})",
+          "CEIL": "ceil({0})", "MIN": "(min({0}, {1}))", "MAX": "(max({0}, {1}))",
+          "POWER": "({0} ^ {1})", **{op: f"({{0}} {sign} {{1}})" for op, sign in _SYMBOL.items()}}
 
 
 def storm_text(e: Expr) -> str:
     """``e`` as Storm prints an expression of its program: every binary operation in
-    parentheses, ``!(a)``, ``-(a)``, ``(c ? a : b)``, a rational literal ``n/d``
-    (``(min(a, b))``, ``(a ^ b)``: Storm's).  :class:`Unprinted` for another operator."""
+    parentheses, ``!(a)``, ``-(a)``, ``(c ? a : b)``, ``(min(a, b))``, ``(a ^ b)``, a
+    rational literal ``n/d`` (:class:`Unprinted` for another operator, and for ``a <=>
+    b`` with a literal side, which Storm shortens as our simplify does not)."""
     if e.op == "LIT":
         v = e.value
         if isinstance(v, bool):
             return "true" if v else "false"
-        if isinstance(v, Fraction) and v.denominator != 1:
-            return f"{v.numerator}/{v.denominator}"
-        return str(int(v))
+        return f"{v.numerator}/{v.denominator}" if v.denominator != 1 else str(int(v))
     if e.op == "VAR":
         return str(e.value)
-    a = [storm_text(x) for x in e.args]
-    if e.op == "NOT":
-        return f"!({a[0]})"
-    if e.op == "MINUS" and len(a) == 1:
-        return f"-({a[0]})"
-    if e.op == "ITE":
-        return f"({a[0]} ? {a[1]} : {a[2]})"
-    if e.op in ("FLOOR", "CEIL"):
-        return f"{e.op.lower()}({a[0]})"
-    if e.op in ("MIN", "MAX"):
-        return f"({e.op.lower()}({a[0]}, {a[1]}))"
-    if e.op == "POWER":
-        return f"({a[0]} ^ {a[1]})"
-    if e.op not in _SYMBOL or e.op == "IFF" and any(x.op == "LIT" for x in e.args):
-        raise Unprinted(e.op)  # (Storm shortens ``b = true`` to ``b``; our simplify not)
-    return f"({a[0]} {_SYMBOL[e.op]} {a[1]})"
+    parts = [storm_text(x) for x in e.args]
+    if e.op == "MINUS" and len(parts) == 1:
+        return f"-({parts[0]})"
+    if e.op not in _FORMS or e.op == "IFF" and any(x.op == "LIT" for x in e.args):
+        raise Unprinted(e.op)
+    return _FORMS[e.op].format(*parts)
 
 
 _KINDS = {"int": INT, "double": DOUBLE, "bool": BOOL}
