@@ -288,3 +288,36 @@ def test_bounded_task_past_the_first_exploration_goes_lazy(monkeypatch, tmp_path
     assert isinstance(game, prism.LazyPrismGame)  # Storm's lazy route, as before
     whole = prism.load_prism(path, task=parse("F[0,3] end"), first_states=64)
     assert type(whole) is prism.PrismGame and len(whole.states) == 41
+
+
+FUNCTIONS = """mdp
+const int N = 3;
+formula least = min(x=1 ? y : N+1, y=2 ? x : N+1);
+formula most = max(x, y);
+formula half = floor(x/2) + ceil(y/2);
+module m
+  x : [0..N] init 0;
+  y : [0..N] init 0;
+  [a] x<N -> 0.5:(x'=x+1) + 0.5:(y'=min(y+1, N));
+endmodule
+label "end" = x = N;
+"""
+
+
+@pytest.mark.parametrize("prop", [
+    "Pmax=? [F least < 2]", "Pmin=? [F most = N & half > 1]", 'Pmax=? [!"end" U least=1]',
+])
+def test_formulas_over_functions_are_read_as_storms_reader_reads_them(tmp_path: Path,
+                                                                      prop: str) -> None:
+    """csma's ``min(c ? a : b, ...)`` formula: read and posed by ours as by Storm's."""
+    from mitld_lp.worlds.properties import pick, pose_property, read_program, read_properties
+    from mitld_lp.worlds.property_own import OwnProperty, read_any
+
+    path = tmp_path / "functions.prism"
+    path.write_text(FUNCTIONS, encoding="utf-8")
+    ours = read_program(str(path), {})
+    (name, mine), = pick(read_any(ours, prop, "P", {}), None, "P")
+    assert isinstance(mine, OwnProperty) and ours._program is None  # noqa: SLF001
+    storm = read_program(str(path), storm=True)
+    (_, theirs), = pick(read_properties(storm.program, prop, "P", {}), None, "P")
+    assert pose_property(name, mine, ours.labels) == pose_property(name, theirs, storm.labels)

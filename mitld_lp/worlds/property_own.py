@@ -103,6 +103,11 @@ def print_expression(e: tuple) -> str:
         return f"!({print_expression(e[1])})"
     if tag == "neg":
         return f"-({print_expression(e[1])})"
+    if tag == "ite":
+        return "({} ? {} : {})".format(*map(print_expression, e[1:]))
+    if tag == "call":
+        inner = f"{e[1]}({', '.join(map(print_expression, e[2:]))})"
+        return f"({inner})" if e[1] in ("min", "max") else inner  # as Storm prints them
     return f"({print_expression(e[2])} {e[1]} {print_expression(e[3])})"
 
 
@@ -221,6 +226,8 @@ class _Resolver:
             if (kind == "bool") != (tag == "not"):
                 raise Decline("an operand of the wrong type")
             return (tag, inner), kind
+        if tag in ("ite", "call"):
+            return self.function(e)
         op = e[1]
         (a, ka), (b, kb) = self.expression(e[2]), self.expression(e[3])
         if op in ("|", "=>", "&"):
@@ -235,6 +242,21 @@ class _Resolver:
         if not ok:
             raise Decline("an operand of the wrong type")
         return ("bin", op, a, b), kind
+
+    def function(self, e: tuple) -> tuple[tuple, str]:
+        """A condition ``c ? a : b`` or a function of Storm's printing, typed as Storm
+        types them (``min``/``max`` an integer of integers, ``floor``/``ceil`` one)."""
+        if e[0] == "ite":
+            (c, kc), (a, ka), (b, kb) = (self.expression(x) for x in e[1:])
+            if kc != "bool" or (ka == "bool") != (kb == "bool"):
+                raise Decline("a condition of the wrong type")
+            return ("ite", c, a, b), ka if ka == kb else "double"
+        parts = [self.expression(x) for x in e[2:]]
+        if any(kind not in _NUMERIC for _, kind in parts):
+            raise Decline("a function of the wrong type")
+        kind = "int" if e[1] in ("floor", "ceil") or all(k == "int" for _, k in parts) \
+            else "double"
+        return ("call", e[1], *(x for x, _ in parts)), kind
 
     def state(self, f: tuple) -> tuple:
         tag = f[0]
