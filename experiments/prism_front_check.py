@@ -12,6 +12,10 @@ seconds, and same or not.
 
     python experiments/prism_front_check.py --qvbs /work/shared/qvbs [--quick] \\
         [--only consensus csma] [--max-states 300000] [--out DIR]
+
+``--horizon K`` loads each world for the task ``F[0,K] LABEL`` (the file's first label)
+instead: the load the lazy route would take, which the own route takes when the world
+is whole within the lazy route's first exploration (``--max-states 4096`` for those).
 """
 
 from __future__ import annotations
@@ -102,7 +106,7 @@ def same(a: Any, b: Any) -> str:
     return ""
 
 
-def load(path: Path, given: dict, own: bool) -> tuple[Any, float, str]:
+def load(path: Path, given: dict, own: bool, task: Any = None) -> tuple[Any, float, str]:
     saved = prism.own_load
     reason: list[str] = []
 
@@ -120,7 +124,7 @@ def load(path: Path, given: dict, own: bool) -> tuple[Any, float, str]:
         prism.own_load = lambda *a, **k: None
     try:
         t = time.process_time()
-        game = prism.load_prism(path, constants=given)
+        game = prism.load_prism(path, constants=given, task=task)
         return game, time.process_time() - t, "; ".join(reason)
     finally:
         prism.own_load = saved
@@ -133,15 +137,26 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--only", nargs="*", default=[])
     ap.add_argument("--max-states", type=int, default=300_000)
+    ap.add_argument("--horizon", type=int, default=None,
+                    help="load for the task F[0,K] of the file's first label")
     ap.add_argument("--out", type=Path,
                     default=Path(__file__).resolve().parent / "out" / "quick" / "prism_front")
     args = ap.parse_args(argv)
     limit = 20_000 if args.quick else args.max_states
     rows, different, taken = [], 0, 0
     for name, path, given in instances(args.qvbs, limit, args.only):
+        task = None
+        if args.horizon is not None:
+            from mitld_lp.logic.parser import parse
+            from mitld_lp.worlds.prism_parse import parse as parse_prism
+
+            labels = parse_prism(path.read_text(encoding="utf-8")).labels
+            if not labels:
+                continue
+            task = parse(f"F[0,{args.horizon}] {labels[0][0]}")
         try:
-            mine, t_own, why = load(path, given, own=True)
-            theirs, t_storm, _ = load(path, given, own=False)
+            mine, t_own, why = load(path, given, own=True, task=task)
+            theirs, t_storm, _ = load(path, given, own=False, task=task)
         except Exception as exc:  # noqa: BLE001 - reported per instance
             rows.append(f"{name}: error {type(exc).__name__}: {exc}")
             different += 1

@@ -158,16 +158,19 @@ def outcome(program: Any, text: str, constants: dict[str, Any], own: bool) -> li
 
 def compare(model: Path, text: str, constants: dict[str, Any]) -> tuple[str, str]:
     """``(kind, detail)``: kind ``own`` (ours read it, the same), ``declined`` (Storm's
-    reader read it), or ``DIFFERENT``."""
+    reader read it), or ``DIFFERENT``; Storm's side reads the program with Storm,
+    ours as the door does (our own parse's symbols where it takes the file)."""
     from mitld_lp.worlds.properties import read_program
     from mitld_lp.worlds.property_own import OwnProperty, read_any
 
-    storm = outcome(read_program(str(model)), text, constants, own=False)
-    program = read_program(str(model))  # Storm's reader adds the file's constants to it
+    storm = outcome(read_program(str(model), storm=True), text, constants, own=False)
+    # ours: the program as the door reads it (our own parse where it takes the file)
+    program = read_program(str(model), constants)
     ours = outcome(program, text, constants, own=True)
     try:
         used = any(isinstance(p, OwnProperty)
-                   for p in read_any(read_program(str(model)), text, "P", constants))
+                   for p in read_any(read_program(str(model), constants), text, "P",
+                                     constants))
     except Exception:  # noqa: BLE001 - an error is compared above
         used = False
     if storm != ours:

@@ -39,7 +39,7 @@ CASES = [
 PART = r"""
 import sys, time
 from mitld_lp.worlds.properties import parse_constants, pick, pose_property, read_program
-program = read_program(sys.argv[1])
+program = read_program(sys.argv[1], storm=True)  # Storm's program, as the base door read it
 constants = parse_constants(sys.argv[2])
 ours = sys.argv[4] == "ours"
 start = time.process_time()

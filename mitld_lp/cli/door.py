@@ -161,16 +161,18 @@ def _declared(args: argparse.Namespace, constants: dict[str, Any], program: Any,
 
 def _properties(args: argparse.Namespace, constants: dict[str, Any]) -> tuple[list[Any],
                                                                               Any]:
-    """``(name, property)`` of each property posed, and the PRISM or JANI file as Storm
-    read it (a JANI file's own properties: every one without ``--prop``, or the one
-    ``--prop NAME`` or ``--prop NUMBER`` names)."""
+    """``(name, property)`` of each property posed, and the PRISM or JANI file read (a
+    PRISM file by our own parse where it takes the file with the constants given, so
+    that a property our reader reads imports no stormpy; a JANI file's own properties:
+    every one without ``--prop``, or the one ``--prop NAME`` or ``--prop NUMBER``
+    names)."""
     from mitld_lp.files import rules
     from mitld_lp.worlds import WorldError
     from mitld_lp.worlds.properties import instantiate, pick, read_program
     from mitld_lp.worlds.property_own import read_any
 
     try:
-        program = read_program(args.model)
+        program = read_program(args.model, constants)
         own = list(program.properties)
         if own and (args.prop is None or len(args.prop) == 1 and (
                 args.prop[0].isdigit() or any(p.get_name() == args.prop[0] for p in own))):

@@ -499,7 +499,7 @@ def load_prism(
     owned = own_load(p.read_text(encoding="utf-8"), where, depth, constants=dict(
         constants or {}), labels=labels, events=frozenset([events] if isinstance(
             events, str) else events), max_states=max_states, memory=memory,
-        define=dict(define or {}), task=task, explore=explore)
+        define=dict(define or {}), task=task, explore=explore, first=first_states)
     if owned is not None:  # no stormpy: the own parser and explorer (prism_own)
         return _game(where, owned.tables, owned.chosen, owned.terminal, PrismRecipe(
             str(p.resolve()), where, dict(constants or {}), dict(define or {}),

@@ -7,7 +7,9 @@ explorer), or None, and the stormpy route then runs unchanged, where:
 
 * the builder is Storm's (``MITLD_PRISM_BUILDER=storm``) or, under ``auto``, the
   explorer's machine code is not cached (``mitld-lp warm``);
-* event effects are asked for, or the world is to be explored as the task reaches it;
+* event effects are asked for, or the world is to be explored as the task reaches it
+  (``explore="lazy"``, or ``"auto"`` with a task of bounded horizon whose world is not
+  whole within the lazy route's first exploration);
 * the file is outside the parsed fragment, has a syntax error, or anything Storm would
   refuse or word (an unknown label, a constant without a value, a type error, a
   variable's range, an update out of range, probabilities that do not sum to 1): Storm's
@@ -79,19 +81,24 @@ def _condition(program: Program, terminal: str) -> Expr | None:
 def own_load(text: str, where: str, depth: ExpressionDepth, *, constants: Mapping[str, Any],
              labels: Iterable[str] | None, events: frozenset[str], max_states: int,
              memory: int, define: Mapping[str, str], task: Formula | None,
-             explore: str) -> Owned | None:
+             explore: str, first: int | None = None) -> Owned | None:
     """The world of the PRISM ``text`` (the file ``where``), or None for the stormpy
-    route (module docstring)."""
+    route (module docstring).  Under ``explore="auto"``, a task of bounded horizon is
+    given the world only when it is whole within the ``first`` states the lazy route
+    explores first (a world Storm's lazy route would also find whole, and give as the
+    plain game)."""
     from mitld_lp.worlds import prism_explore
     from mitld_lp.worlds.prism_build import BYTES_PER_STATE
     from mitld_lp.worlds.prism_terminal import decided as decided_when
     from mitld_lp.worlds.prism_terminal import render
 
     builder = prism_explore.chosen_builder()
-    lazy = explore == "lazy" or (explore == "auto" and task is not None
-                                 and horizon(task) is not None)
-    if builder == "storm" or events or lazy:
+    if builder == "storm" or events or explore == "lazy":
         return None
+    if explore == "auto" and task is not None and horizon(task) is not None:
+        if first is None:
+            return None
+        max_states = min(max_states, first)  # past it: Storm's lazy route
     if builder == "auto" and not prism_explore.kernel_ready():
         return None
     try:

@@ -44,7 +44,7 @@ define.
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from fractions import Fraction
 from typing import Any
@@ -124,34 +124,56 @@ def parse_constants(text: str, where: str = "--const") -> dict[str, bool | int |
     return out
 
 
-@dataclass(frozen=True)
 class Program:
-    """A PRISM or JANI file as Storm parsed it, for its properties: the program (or JANI
-    model), its labels (``name -> expression``; a JANI model's transient Boolean
-    variables, ``name -> name``), the constants it declares, the properties a JANI file
-    carries, and the names a new proposition must not take (a JANI model's variables)."""
+    """A PRISM or JANI file, for its properties: the program (Storm's PRISM program or
+    JANI model), its labels (``name -> expression``, as Storm prints it; a JANI model's
+    transient Boolean variables, ``name -> name``), the constants it declares, the
+    properties a JANI file carries, and the names a new proposition must not take (a
+    JANI model's variables).
 
-    program: Any
-    labels: dict[str, str]
-    constants: frozenset[str]
-    properties: tuple[Any, ...] = ()
-    reserved: frozenset[str] = frozenset()
-    jani: bool = False
+    A PRISM file our own parse reads (:func:`read_program`) carries its ``symbols``
+    (:class:`~mitld_lp.worlds.prism_symbols.Symbols`, all our property reader needs)
+    and ``storm``, the function that parses it with Storm: :attr:`program` calls it the
+    first time it is read (Storm's property reader, an expected reward), not before."""
+
+    def __init__(self, program: Any, labels: dict[str, str], constants: frozenset[str],
+                 properties: tuple[Any, ...] = (), reserved: frozenset[str] = frozenset(),
+                 jani: bool = False, *, symbols: Any = None,
+                 storm: Callable[[], Any] | None = None) -> None:
+        if program is None and storm is None:
+            raise ValueError("a Program needs Storm's program or the function that parses it")
+        self._program, self._storm = program, storm
+        self.labels, self.constants, self.properties = labels, constants, properties
+        self.reserved, self.jani, self.symbols = reserved, jani, symbols
+
+    @property
+    def program(self) -> Any:
+        """Storm's program (or JANI model), parsed on first use for an own parse's file."""
+        if self._program is None:
+            assert self._storm is not None
+            self._program = self._storm()
+        return self._program
 
     @property
     def chain(self) -> bool:
         """Whether the file is a DTMC (one scheduler: ``P=?``, ``R=?`` and ``T=?`` need
         no ``min`` or ``max``, as Storm reads them)."""
+        if self._program is None and self.symbols is not None:
+            return bool(self.symbols.chain)
         return str(getattr(self.program, "model_type", "")).rsplit(".", 1)[-1] == "DTMC"
 
 
-def read_program(path: str) -> Program:
-    """The PRISM file at ``path`` parsed by Storm (after the depth check that keeps
-    Storm's parser from crashing: :mod:`mitld_lp.worlds.prism_depth`), or the JANI file
-    (``.jani``) with its properties."""
-    from pathlib import Path
+def read_program(path: str, constants: Mapping[str, Any] | None = None, *,
+                 storm: bool = False) -> Program:
+    """The PRISM file at ``path``, or the JANI file (``.jani``) with its properties.
 
-    from mitld_lp.worlds.prism import stormpy_module
+    A PRISM file is read by our own parse (no stormpy) where it takes the file with the
+    ``constants`` given (:func:`~mitld_lp.worlds.prism_symbols.read_own_program`;
+    Storm's program is then parsed only if something asks for it), else, and always
+    with ``storm``, by Storm, after the depth check that keeps Storm's parser from
+    crashing (:mod:`mitld_lp.worlds.prism_depth`): a file Storm refuses is refused with
+    Storm's words."""
+    from pathlib import Path
 
     if Path(path).suffix.lower() == ".jani":
         from mitld_lp.worlds.jani import read_jani
@@ -160,12 +182,26 @@ def read_program(path: str) -> Program:
         return Program(jani.model, jani.labels, jani.constants, tuple(jani.properties),
                        jani.variables, jani=True)
     from mitld_lp.worlds.prism_depth import ExpressionDepth, check_text
-    from mitld_lp.worlds.prism_program import parse_program
 
     check_text(Path(path), path, ExpressionDepth())
-    program = parse_program(stormpy_module(), path, path)
+    if not storm:
+        from mitld_lp.worlds.prism_symbols import read_own_program
+
+        symbols = read_own_program(path, constants or {})
+        if symbols is not None:
+            return Program(None, dict(symbols.labels), frozenset(symbols.constants),
+                           symbols=symbols, storm=lambda: storm_program(path))
+    program = storm_program(path)
     return Program(program, {lab.name: str(lab.expression) for lab in program.labels},
                    frozenset(c.name for c in program.constants))
+
+
+def storm_program(path: str) -> Any:
+    """Storm's parse of the PRISM file at ``path`` (its depth checked already)."""
+    from mitld_lp.worlds.prism import stormpy_module
+    from mitld_lp.worlds.prism_program import parse_program
+
+    return parse_program(stormpy_module(), path, path)
 
 
 def _parse_error(message: str, text: str, where: str) -> PropertyError:

@@ -12,18 +12,20 @@ queries, other filters, reward bounds, LTL, functions, a name it does not know, 
 that does not parse: Storm's answer or refusal is then today's, word for word).
 
 :func:`symbols_of_storm` builds the :class:`Symbols` of a Storm PRISM program (its
-definitions are Storm's printing); a reader of the PRISM text can build them from its
-own parse (definitions as written, ``storm_printed=False``).
+definitions are Storm's printing); :func:`mitld_lp.worlds.prism_symbols.own_symbols`
+builds the same record from our own parse of the PRISM text, printed as Storm prints
+it, so that a file the own parse takes is read without stormpy.
 """
 
 from __future__ import annotations
 
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any
 
+from mitld_lp.worlds.prism_symbols import Symbols
 from mitld_lp.worlds.properties import (
     PropertyError,
     Query,
@@ -40,29 +42,6 @@ from mitld_lp.worlds.property_parse import (
 
 __all__ = ["Symbols", "OwnProperty", "symbols_of_storm", "symbols_of", "read_own", "read_any",
            "print_formula"]
-
-
-@dataclass(frozen=True)
-class Symbols:
-    """What a property reads of its program.
-
-    Attributes:
-        labels: ``name -> expression text`` of the file's labels.
-        constants: ``name -> (kind, definition text or None)`` (kind ``int``,
-            ``double``, ``bool``; None: the file leaves it open).
-        variables: ``name -> kind`` (``int`` or ``bool``).
-        formulas: ``name -> expression text`` (a name used and absent here is
-            declined, so a reader may leave them out).
-        chain: the file is a DTMC.
-        storm_printed: the definition texts are Storm's printing (``1/2`` a number).
-    """
-
-    labels: Mapping[str, str]
-    constants: Mapping[str, tuple[str, str | None]]
-    variables: Mapping[str, str]
-    formulas: Mapping[str, str] = field(default_factory=dict)
-    chain: bool = False
-    storm_printed: bool = False
 
 
 def symbols_of_storm(program: Any, labels: Mapping[str, str], *,
@@ -93,6 +72,8 @@ def symbols_of(program: Any) -> Symbols | None:
     properties)."""
     if program.jani:
         return None
+    if program.symbols is not None:  # our own parse's (prism_symbols): no stormpy
+        return program.symbols
     try:
         return symbols_of_storm(program.program, program.labels, chain=program.chain)
     except Decline:
@@ -122,6 +103,11 @@ def print_expression(e: tuple) -> str:
         return f"!({print_expression(e[1])})"
     if tag == "neg":
         return f"-({print_expression(e[1])})"
+    if tag == "ite":
+        return "({} ? {} : {})".format(*map(print_expression, e[1:]))
+    if tag == "call":
+        inner = f"{e[1]}({', '.join(map(print_expression, e[2:]))})"
+        return f"({inner})" if e[1] in ("min", "max") else inner  # as Storm prints them
     return f"({print_expression(e[2])} {e[1]} {print_expression(e[3])})"
 
 
@@ -240,6 +226,8 @@ class _Resolver:
             if (kind == "bool") != (tag == "not"):
                 raise Decline("an operand of the wrong type")
             return (tag, inner), kind
+        if tag in ("ite", "call"):
+            return self.function(e)
         op = e[1]
         (a, ka), (b, kb) = self.expression(e[2]), self.expression(e[3])
         if op in ("|", "=>", "&"):
@@ -254,6 +242,21 @@ class _Resolver:
         if not ok:
             raise Decline("an operand of the wrong type")
         return ("bin", op, a, b), kind
+
+    def function(self, e: tuple) -> tuple[tuple, str]:
+        """A condition ``c ? a : b`` or a function of Storm's printing, typed as Storm
+        types them (``min``/``max`` an integer of integers, ``floor``/``ceil`` one)."""
+        if e[0] == "ite":
+            (c, kc), (a, ka), (b, kb) = (self.expression(x) for x in e[1:])
+            if kc != "bool" or (ka == "bool") != (kb == "bool"):
+                raise Decline("a condition of the wrong type")
+            return ("ite", c, a, b), ka if ka == kb else "double"
+        parts = [self.expression(x) for x in e[2:]]
+        if any(kind not in _NUMERIC for _, kind in parts):
+            raise Decline("a function of the wrong type")
+        kind = "int" if e[1] in ("floor", "ceil") or all(k == "int" for _, k in parts) \
+            else "double"
+        return ("call", e[1], *(x for x, _ in parts)), kind
 
     def state(self, f: tuple) -> tuple:
         tag = f[0]

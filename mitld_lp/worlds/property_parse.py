@@ -7,7 +7,9 @@ formulas are small trees of tuples:
 
 * expressions: ``("lit", kind, value)`` (kind ``int``, ``rat``, ``bool``), ``("id",
   name, line, column)``, ``("not", e)``, ``("neg", e)``, ``("bin", op, a, b)`` with
-  ``op`` one of ``| => & = != < <= > >= + - * /``;
+  ``op`` one of ``| => & = != < <= > >= + - * /``; in Storm's printing of a program's
+  definitions (a formula over ``min`` and ``?:``, as csma's) also ``("call", name,
+  *arguments)`` for ``min``, ``max``, ``floor``, ``ceil`` and ``("ite", c, a, b)``;
 * state formulas: ``("label", name)``, ``("atom", expression)``, ``("fnot", f)``,
   ``("fbin", op, a, b)`` (``op`` ``&`` or ``|``);
 * path formulas: ``("F", bound, f)``, ``("G", f)``, ``("X", f)``, ``("U", bound, a,
@@ -456,8 +458,40 @@ class _StormPrinted(_Parser):
         super().__init__("".join(out), where)
 
     def atom(self) -> tuple:
+        """Also Storm's printing of the functions ``(min(a, b))``, ``(max(a, b))``,
+        ``floor(a)``, ``ceil(a)`` (``("call", name, *arguments)``) and of a condition
+        ``(c ? a : b)`` (``("ite", c, a, b)``), always in parentheses there."""
         kind, value, _, _ = self.peek()
         if kind == "name" and value in self.rationals:
             self.i += 1
             return ("lit", "rat", self.rationals[value])
+        if kind == "name" and value in _ARITY and self.peek(1)[:2] == ("op", "("):
+            self.i += 2
+            arguments = [self.expression()]
+            while self.at(","):
+                self.i += 1
+                arguments.append(self.expression())
+            self.expect(")")
+            if len(arguments) != _ARITY[value]:
+                raise Decline(f"the function {value!r} with {len(arguments)} arguments")
+            return ("call", value, *arguments)
+        if self.at("("):
+            saved = self.i
+            self.i += 1
+            condition = self.expression()
+            if self.at("?"):
+                self.i += 1
+                a = self.expression()
+                self.expect(":")
+                b = self.expression()
+                self.expect(")")
+                return ("ite", condition, a, b)
+            self.i = saved
         return super().atom()
+
+    def refuse_unknown_operator(self) -> None:
+        if not self.at("?"):  # a condition's, read by atom
+            super().refuse_unknown_operator()
+
+
+_ARITY = {"min": 2, "max": 2, "floor": 1, "ceil": 1}
