@@ -3,7 +3,8 @@ kernels (:mod:`mitld_lp.worlds.prism_explore`), which a PRISM or JANI load uses 
 where their machine code is cached already; until then Storm's explicit builder builds
 every PRISM world (the same tables, slower).  Also the lifted policy's kernel
 (:mod:`mitld_lp.solvers.lift_kernels`), which a solve uses only where it is cached
-(until then the NumPy search: the same choices).  Then every other kernel signature a
+(until then the NumPy search: the same choices), and the blocks' cut
+(:mod:`mitld_lp.solvers.block_kernels`), likewise.  Then every other kernel signature a
 solve may link (:data:`mitld_lp.util.warm_kernels.SIGNATURES`: the analysis's, the
 iteration's, the certificate's, the quotient's, the LP's lift, the step-bounded and the
 sensed routes'), which a first solve on a machine compiled otherwise (seconds each)."""
@@ -42,7 +43,8 @@ def cmd_warm(args: argparse.Namespace) -> int:
     if compile_chain_kernels():  # the policy jump's chain solve (seconds, once)
         say_answer(f"compiled the policy jump's chain kernels in "
                    f"{time.process_time() - start:.1f} s of CPU")
-    _warm_lift()
+    _warm_kernel("lift_kernels", "first_staying_kernel", "the lifted policy's kernel")
+    _warm_kernel("block_kernels", "split_rows_kernel", "the blocks' cut")
     _warm_solve(args)
     return EXIT_OK
 
@@ -64,18 +66,20 @@ def _warm_solve(args: argparse.Namespace) -> None:
         say_answer(f"the solve's {listed} kernel signatures were compiled already")
 
 
-def _warm_lift() -> None:
-    """Compile (or find cached) the lifted policy's kernel; nothing where numba is not
-    installed (the solve then searches with NumPy)."""
+def _warm_kernel(name: str, qualname: str, label: str) -> None:
+    """Compile (or find cached) the kernel ``qualname`` of the solver's module ``name``
+    by its ``warm_up``; nothing where numba is not installed (the solve then takes its
+    NumPy route: the same answers)."""
+    import importlib
+
     try:
-        from mitld_lp.solvers import lift_kernels
+        module = importlib.import_module(f"mitld_lp.solvers.{name}")
     except ImportError:
         return
     from mitld_lp.util import kernel_loader
 
-    cached = kernel_loader.cached(lift_kernels.__file__, "first_staying_kernel")
+    cached = kernel_loader.cached(module.__file__, qualname)
     start = time.process_time()
-    lift_kernels.warm_up()
+    module.warm_up()
     if not cached:
-        say_answer(f"compiled the lifted policy's kernel in "
-                   f"{time.process_time() - start:.1f} s of CPU")
+        say_answer(f"compiled {label} in {time.process_time() - start:.1f} s of CPU")

@@ -32,6 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.solvers import level_batches, level_gate
+from mitld_lp.solvers.block_cut import Block
 from mitld_lp.solvers.graph import (
     Blocks,
     Level,
@@ -336,62 +337,6 @@ class SingleLevels:
 # ---------------------------------------------------------------------------------------
 # Non-trivial blocks: their matrices and exact policy iteration on them.
 # ---------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class Block:
-    """States ``states`` of the quotient (a union of components of one level) with
-    their choices: ``inner`` moves inside the block (columns: positions in ``states``),
-    ``outer`` the moves out of it (all quotient columns, the block's own entries left
-    out), ``starts`` the first choice of each state."""
-
-    states: np.ndarray
-    choices: np.ndarray
-    inner: sp.csr_array
-    outer: sp.csr_array  # the rows' entries outside the block (each entry in one of the
-    # two matrices: the rows are held once, not twice with the block's columns zeroed)
-    starts: np.ndarray
-    to_target: np.ndarray
-
-    @property
-    def groups(self) -> np.ndarray:
-        """``(n_states + 1,)`` the row groups of the block's choices."""
-        return np.append(self.starts, self.choices.shape[0])
-
-    @staticmethod
-    def of(q: Quotient, states: np.ndarray) -> Block:
-        lo, hi = q.row_groups[states], q.row_groups[states + 1]
-        choices = gather_ranges(lo, hi)
-        rows = sp.csr_array(q.matrix[choices])
-        index = rows.indices.dtype
-        at = np.full(q.n_states, -1, dtype=index)  # a column's position in the block
-        at[states] = np.arange(states.size, dtype=index)
-        local = at[rows.indices]
-        del at
-        inside = local >= 0
-        # the entries split in their rows' order: each row's sum adds the same terms
-        inner = _entries(rows, inside, local, states.size)
-        del local
-        np.logical_not(inside, out=inside)
-        outer = _entries(rows, inside, rows.indices, q.n_states)
-        del rows, inside
-        starts = np.concatenate([[0], np.cumsum(hi - lo)[:-1]]).astype(np.int64)
-        return Block(states, choices, inner, outer, starts, q.to_target[choices])
-
-    def exits(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """``(choices, 2)`` exit rewards from the lower / upper bounds downstream."""
-        return np.column_stack([self.to_target + self.outer @ lo,
-                                self.to_target + self.outer @ hi])
-
-
-def _entries(rows: sp.csr_array, keep: np.ndarray, columns: np.ndarray,
-             n_columns: int) -> sp.csr_array:
-    """The entries ``keep`` of ``rows`` (in their order), with the ``columns`` given."""
-    before = np.concatenate([[0], np.cumsum(keep)])  # kept entries before each entry
-    indptr = before[rows.indptr].astype(rows.indptr.dtype)
-    del before
-    return sp.csr_array((rows.data[keep], columns[keep], indptr),
-                        shape=(rows.shape[0], n_columns))
 
 
 DENSE_LU_STATES = 256
