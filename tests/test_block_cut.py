@@ -145,3 +145,30 @@ def test_iteration_with_the_cut_same_bracket_holding_the_optimum(monkeypatch,
     # the LP solver's own tolerance (1e-9) on its side of the comparison
     assert np.all(runs[1].lower <= v + 1e-8) and np.all(v <= runs[1].upper + 1e-8)
     assert float(np.max(runs[1].upper - runs[1].lower)) < 1e-6
+
+
+def test_warm_up_compiles_the_signature_of_read_only_row_groups(monkeypatch) -> None:
+    """``warm``'s part for the cut covers a solve's call: a model's row groups are
+    read-only, and read-only is part of numba's type (the first benchmark run after
+    ``warm`` compiled that signature mid-solve)."""
+    from mitld_lp.solvers import block_kernels
+    from mitld_lp.util import kernel_loader
+
+    real = block_kernels.split_rows_kernel
+    seen: list = []
+
+    def record(*args):
+        seen.append(kernel_loader.type_key(args))
+        return real(*args)
+
+    monkeypatch.setattr(block_kernels, "split_rows_kernel", record)
+    for index in (np.int32, np.int64):
+        groups = np.array([0, 1, 2], dtype=np.int64)
+        groups.flags.writeable = False  # as a model holds them
+        m = sp.csr_array((np.array([1.0, 1.0]), np.array([1, 0], dtype=index),
+                          np.array([0, 1, 2], dtype=index)), shape=(2, 2))
+        split_rows(groups, m, np.array([0, 1]), 2)
+    solve_keys = set(seen)
+    seen.clear()
+    block_kernels.warm_up()
+    assert len(solve_keys) == 2 and solve_keys <= set(seen)
