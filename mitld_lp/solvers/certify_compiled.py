@@ -273,13 +273,15 @@ def compiled_chain_parts(m: Any, states: np.ndarray, rows: np.ndarray, target: n
     return (never, sure, *got)
 
 
-CYCLING_MIN_STATES = 120_000
+CYCLING_MIN_STATES = 30_000
 """The fewest states a minimum's end-component test asks about
-(:func:`compiled_cycling`) whose choices are read by the compiled kernel: its first
-call in a process links it (about 3 ms of CPU measured inside a solve), then it reads
-some 15 ns a state, against the NumPy reads' 35-40 ns (QVBS csma 4-2, 232,810 states
-asked: 9.5 ms NumPy, 4-6 ms compiled; firewire_dl 3-600, 93,996: 3 ms NumPy, 6 ms on
-the first compiled call)."""
+(:func:`compiled_cycling`) whose choices are read by the compiled kernel.  Set when a
+kernel's first call could compile it (120,000 then); since ``mitld-lp warm`` compiles
+it, its first call in a process is a link from the loader's cache, measured warm
+(cert-84, the least of 7, CPU): QVBS firewire_dl 3-600 (93,996 states asked) 0.7 ms
+compiled, 2.2 ms on the process's first call, against 5.0 ms of NumPy reads; csma 4-2
+(232,810) 2.8 ms against 12.4.  The NumPy reads cost some 50 ns a state asked, the
+first call's link about 1.5 ms: even then the kernel wins from about 30,000."""
 
 
 def compiled_cycling(m: Any, groups: np.ndarray, comp: np.ndarray, left: np.ndarray,
