@@ -143,13 +143,12 @@ def _fails(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
            upper: bool) -> np.ndarray:
     """The states (not ``free``) where some choice breaks the pre- (``upper``) or
     sub-fixed point inequality, rounding and the convex rule accounted for (a robust
-    choice passes when one of nature's rows does).  Above, from the repair's needs where
+    choice passes when one of nature's rows does).  From the repair's needs where
     compiled (:func:`~mitld_lp.solvers.certify_compiled.compiled_failing`: the same
-    verdicts, and the repair's kernel the only one a maximum's check links)."""
-    if upper:
-        failing = compiled_failing(st, rnd, x, free)
-        if failing is not None:
-            return failing
+    verdicts, and the repair's kernel the only one a certificate's check links)."""
+    failing = compiled_failing(st, rnd, x, free, upper=upper)
+    if failing is not None:
+        return failing
     ok = compiled_checks(st, rnd, x, free, upper)  # one compiled pass, where paid
     if ok is None:
         ok = numpy_checks(st, rnd, x, free, upper)
@@ -235,10 +234,9 @@ def _fails_among(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray, upper
     computations, with the same outcome (:func:`_touched`)."""
     m = st.matrix
     among = np.flatnonzero(states)
-    if upper:  # from the repair's needs, as :func:`_fails`
-        failing = compiled_failing(st, rnd, x, free, among)
-        if failing is not None:
-            return failing
+    failing = compiled_failing(st, rnd, x, free, among, upper)  # as :func:`_fails`
+    if failing is not None:
+        return failing
     rows, choice_starts, state_starts = st.rows_of(among)
     good = compiled_checks(st, rnd, x, free, upper, among)
     if good is None:

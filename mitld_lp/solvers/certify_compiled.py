@@ -180,13 +180,15 @@ def compiled_needs(st: Any, rnd: Rounding, x: np.ndarray, states: np.ndarray,
 
 
 def compiled_failing(st: Any, rnd: Rounding, x: np.ndarray, free: np.ndarray,
-                     states: np.ndarray | None = None) -> np.ndarray | None:
-    """The pre-fixed point (upper) Bellman check's failing states (a mask: those of
-    ``states``, every state where None, that are not ``free``) by the repair's kernel
-    (:func:`~mitld_lp.solvers.certify_repair_kernels.state_needs` asked for verdicts:
-    the comparisons of :func:`~mitld_lp.solvers.certify_kernels.bellman_rows` on the
-    same operands, a state at a time), so that a maximum's certificate links one
-    kernel, not the check's beside the repair's.  None where :func:`compiled_checks`
+                     states: np.ndarray | None = None, upper: bool = True,
+                     ) -> np.ndarray | None:
+    """The pre- (``upper``) or sub-fixed point Bellman check's failing states (a mask:
+    those of ``states``, every state where None, that are not ``free``) by the repair's
+    kernel (:func:`~mitld_lp.solvers.certify_repair_kernels.state_needs` asked for
+    verdicts: the comparisons of :func:`~mitld_lp.solvers.certify_kernels.bellman_rows`
+    on the same operands, a state at a time), so that a certificate links one kernel,
+    not the check's beside the repair's, and no verdict a row is held and reduced over
+    the choices (QVBS csma 4-2's lower bound: 658,129 rows).  None where :func:`compiled_checks`
     would not run, where a state has no choice or a choice no row, or (every state)
     where the rows are not the states' choices one after the other (the check's
     segmented reductions read other rows there)."""
@@ -213,8 +215,8 @@ def compiled_failing(st: Any, rnd: Rounding, x: np.ndarray, free: np.ndarray,
         ask = ask.astype(np.int64, copy=False)
         out = np.empty(ask.size)
         state_needs(ask, groups, nature, m.indptr, m.indices, m.data,
-                    np.ascontiguousarray(x), rnd.count, rnd.slack_of, rnd.high_of, True,
-                    out, True)
+                    np.ascontiguousarray(x), rnd.count, rnd.slack_of,
+                    rnd.high_of if upper else rnd.low_of, bool(upper), out, True)
         failing[ask] = out > 0
     return failing
 

@@ -127,22 +127,64 @@ def _fails_above(s, groups, nature, has_nature, indptr, indices, data, x, count,
     return False
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _fails_below(s, groups, nature, has_nature, indptr, indices, data, x, count,
+                 slack_of, factor_of):  # pragma: no cover - compiled
+    """Whether state ``s`` (each choice with a row) fails the sub-fixed point check of
+    :func:`~mitld_lp.solvers.certify_kernels.bellman_rows` (not ``upper``): the same
+    comparisons on the same operands (a row passes when its rounded bound, at least 0,
+    else the least ``x`` over its stored entries, is at least ``x[s]``; a choice when
+    one of its rows does; the state when every choice does), stopping at a choice's
+    first passing row and at the first failing choice."""
+    own = x[s]
+    for c in range(groups[s], groups[s + 1]):
+        lo, hi = _rows_of(c, nature, has_nature)
+        passed = False
+        for r in range(lo, hi):
+            acc = 0.0
+            for e in range(indptr[r], indptr[r + 1]):
+                acc += data[e] * x[indices[e]]
+            f = count[r]
+            bound = (acc - slack_of[f]) * factor_of[f]
+            if bound < 0.0:
+                bound = 0.0
+            if bound >= own:
+                passed = True
+                break
+            ext = np.inf
+            for e in range(indptr[r], indptr[r + 1]):
+                v = x[indices[e]]
+                if v < ext:
+                    ext = v
+            if ext >= own:
+                passed = True
+                break
+        if not passed:
+            return True
+    return False
+
+
 @numba.njit(cache=True, nogil=True)
 def state_needs(states, groups, nature, indptr, indices, data, x, count, slack_of,
                 factor_of, upper, out, verdict):  # pragma: no cover - compiled
     """Per state of ``states`` (each with a choice, each choice with a row), its need
     (:func:`_need`), written into ``out``: what the repair's NumPy
     :func:`~mitld_lp.solvers.certify_repair._needed` gives, the same operations on the
-    same operands.  ``verdict`` (with ``upper``): instead of the need, +inf where the
-    state fails the pre-fixed point check and -inf where it passes
-    (:func:`_fails_above`: the Bellman check's verdict, so that a maximum's check and
-    its repair link this one kernel)."""
+    same operands.  ``verdict``: instead of the need, +inf where the state fails the
+    pre- (``upper``, :func:`_fails_above`) or sub-fixed point check
+    (:func:`_fails_below`) and -inf where it passes: the Bellman check's verdict a
+    state at a time, so that a certificate's check and its repair link this one
+    kernel, and no verdict a row is held and reduced over the choices after."""
     has_nature = nature.shape[0] > 0
-    if verdict and upper:
+    if verdict:
         for i in range(states.shape[0]):
-            out[i] = np.inf if _fails_above(states[i], groups, nature, has_nature, indptr,
-                                            indices, data, x, count, slack_of,
-                                            factor_of) else -np.inf
+            if upper:
+                failed = _fails_above(states[i], groups, nature, has_nature, indptr,
+                                      indices, data, x, count, slack_of, factor_of)
+            else:
+                failed = _fails_below(states[i], groups, nature, has_nature, indptr,
+                                      indices, data, x, count, slack_of, factor_of)
+            out[i] = np.inf if failed else -np.inf
         return
     for i in range(states.shape[0]):
         out[i] = _need(states[i], groups, nature, has_nature, indptr, indices, data, x,
