@@ -9,13 +9,12 @@ choice, rows beyond the states') or ``x`` is not finite, the check runs."""
 
 from __future__ import annotations
 
-from fractions import Fraction
-
 import numpy as np
 import pytest
 import scipy.sparse as sp
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as hs
+from test_cert_verdicts_84 import definition
 
 from mitld_lp.solvers import certify as C
 from mitld_lp.solvers import certify_compiled as CC
@@ -59,37 +58,6 @@ def models(draw):
     return st, x, free
 
 
-def _definition(st, rnd, x, free) -> np.ndarray:
-    """The upper check, a row at a time: a row passes when ``(sum + slack) * high``
-    (its sum from 0 in its entries' order) or the largest ``x`` over its stored
-    entries (none: it passes) is at most the state's value; a choice when one of its
-    rows does; a state (not free) when every choice does."""
-    m = st.matrix
-    out = np.zeros(st.n_states, dtype=bool)
-    for s in range(st.n_states):
-        if free[s]:
-            continue
-        own = Fraction(float(x[s]))
-        for c in range(int(st.groups[s]), int(st.groups[s + 1])):
-            rows = range(c, c + 1) if st.nature is None else range(int(st.nature[c]),
-                                                                  int(st.nature[c + 1]))
-            passed = False
-            for r in rows:
-                lo, hi = int(m.indptr[r]), int(m.indptr[r + 1])
-                acc = 0.0
-                for e in range(lo, hi):
-                    acc += float(m.data[e]) * float(x[m.indices[e]])
-                k = int(rnd.count[r])
-                bound = (acc + float(rnd.slack_of[k])) * float(rnd.high_of[k])
-                ext = max((Fraction(float(x[m.indices[e]])) for e in range(lo, hi)),
-                          default=None)
-                if Fraction(bound) <= own or ext is None or ext <= own:
-                    passed = True
-            if not passed:
-                out[s] = True
-    return out
-
-
 def _present(st, rnd, x, free, compiled: bool) -> np.ndarray:
     """The present check (:func:`certify._fails`), compiled or NumPy, the needs off."""
     with pytest.MonkeyPatch.context() as mp:
@@ -113,7 +81,7 @@ def test_needs_give_the_checks_verdicts(model) -> None:
     rnd = rounding(st.matrix)
     got = _from_needs(st, rnd, x, free)
     assert got is not None
-    want = _definition(st, rnd, x, free)
+    want = definition(st, rnd, x, free, True)  # (test_cert_verdicts_84's: both sides)
     np.testing.assert_array_equal(got, want)
     np.testing.assert_array_equal(got, _present(st, rnd, x, free, compiled=True))
     np.testing.assert_array_equal(got, _present(st, rnd, x, free, compiled=False))
