@@ -1,15 +1,16 @@
 """The plain route's solve of both truncation models (mitld_lp.routes.plain.solve_models)
-with the lifted bounds held folded through the certificates: the iteration's bounds
-bracket the optimum found by brute force over every deterministic policy (each
-policy's chain solved with numpy, written here), the LP's values agree with it, and a
-folded vector comes back to the bit and holds no reference to the array it replaced."""
+with the records' bounds and values held on the quotient and lifted at read
+(mitld_lp.solvers.result.Lifted): the iteration's bounds bracket the optimum found by
+brute force over every deterministic policy (each policy's chain solved with numpy,
+written here), the LP's values agree with it, a held vector lifts to what the
+quotient's values give by a loop over the states written here, and the held records
+give the eager ones (lifted when made) to the bit, on both sides of the trim
+threshold."""
 
 from __future__ import annotations
 
-import gc
 import itertools
 import time
-import weakref
 from dataclasses import replace
 
 import numpy as np
@@ -18,7 +19,8 @@ import pytest
 from mitld_lp.problem import Settings
 from mitld_lp.routes import plain
 from mitld_lp.routes.acceptance import Acceptance
-from mitld_lp.routes.plain import _Folding, solve_models
+from mitld_lp.routes.plain import solve_models
+from mitld_lp.solvers import result as records
 from mitld_lp.solvers.analysis import analyse
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.testing import random_mdp
@@ -97,49 +99,60 @@ def _quotient(seed: int):
     return mdp, q
 
 
+def _lift_by_loop(reduced, state_map, one, forced: bool) -> np.ndarray:
+    """The lift written as a loop over the states: a kept state reads its reduced
+    state's value, a removed one 1 on ``one`` else 0; ``forced``: ``one`` is 1."""
+    out = np.empty(state_map.size)
+    for s, r in enumerate(state_map.tolist()):
+        if forced and one[s]:
+            out[s] = 1.0
+        elif r < 0:
+            out[s] = 1.0 if one[s] else 0.0
+        else:
+            out[s] = reduced[r]
+    return out
+
+
+@pytest.mark.parametrize("forced", [False, True])
 @pytest.mark.parametrize("seed", range(4))
-def test_fold_comes_back_to_the_bit_and_lets_the_array_go(seed: int) -> None:
+def test_held_vector_lifts_as_the_loop_and_reads_on_the_quotient(seed: int,
+                                                                  forced: bool) -> None:
     mdp, q = _quotient(seed)
-    fold = _Folding.of(q)
+    assert 0 < q.n_states < mdp.n_states  # states removed: the lift gathers
     rng = np.random.default_rng(seed)
-    assert 0 < q.n_states < mdp.n_states  # states removed: folding pays
-    # a lifted vector, with a few entries the lift would not give (patched back)
-    x = np.asarray(q.lift(rng.random(q.n_states)), dtype=np.float64).copy()
-    odd = rng.choice(x.size, size=5, replace=False)
-    x[odd] = -rng.random(5)
-    x[odd[0]] = -0.0  # told from 0.0 by its bits
-    want = x.copy()
-    ref = weakref.ref(x)
-    folded = fold.fold(x)
-    del x
-    gc.collect()
-    assert folded.whole is None
-    assert ref() is None  # the folded record holds no reference to the lifted array
-    got = folded.unfold()
-    assert got.dtype == want.dtype
-    np.testing.assert_array_equal(got.view(np.uint64), want.view(np.uint64))
-    # a vector no quotient values give is kept whole (folding would not be smaller)
-    noise = rng.random(mdp.n_states)
-    kept = fold.fold(noise)
-    assert kept.whole is noise
+    one = np.asarray(q.qualitative.one).copy()
+    if forced:  # a kept state of value 1 too: its entry lifts to 1, not its value
+        one[np.flatnonzero(q.state_map >= 0)[0]] = True
+    base = np.zeros((q.n_states, 3))
+    base[:, 1] = rng.random(q.n_states)
+    v = records.Lifted.of(base[:, 1], q.state_map, one, forced=forced)
+    assert v.reduced.base is None  # a copy: the 3-column array is not held
+    want = _lift_by_loop(base[:, 1], q.state_map, one, forced)
+    got = v.lift()
+    assert not got.flags.writeable
+    np.testing.assert_array_equal(_bits(got), _bits(want))
+    assert [v.at(s) for s in range(mdp.n_states)] == want.tolist()
+    on = v.on(q.state_map)
+    if forced:  # a kept state forced: the reduced values are not what it reads
+        assert on is None
+    else:  # every member of a reduced state reads its value
+        kept = np.flatnonzero(q.state_map >= 0)
+        np.testing.assert_array_equal(_bits(on[q.state_map[kept]]), _bits(want[kept]))
+    assert v.on(q.state_map.copy()) is None  # another map: not read on the quotient
 
 
-def test_held_records_let_the_lifted_bounds_go() -> None:
+def test_records_hold_no_product_vector() -> None:
     from mitld_lp.solvers.iteration import interval_iterations
 
     mdp, q = _quotient(1)
     (it,) = interval_iterations(mdp, [q])
-    refs = [weakref.ref(it.lower), weakref.ref(it.upper)]
-    lower, upper = it.lower.copy(), it.upper.copy()
-    bare, _, folded = _Folding.of(q).held(it, None)
-    del it
-    gc.collect()
-    assert bare.lower is None and bare.upper is None
-    assert all(r() is None for r in refs)
-    np.testing.assert_array_equal(folded["lower"].unfold().view(np.uint64),
-                                  lower.view(np.uint64))
-    np.testing.assert_array_equal(folded["upper"].unfold().view(np.uint64),
-                                  upper.view(np.uint64))
+    for v in (it.held_lower, it.held_upper):
+        assert isinstance(v, records.Lifted)
+        assert v.reduced.shape == (q.n_states,) and v.state_map is q.state_map
+    a, b = it.lower, it.lower
+    assert a is not b  # lifted at each read, not kept
+    np.testing.assert_array_equal(_bits(a), _bits(b))
+    assert it.value_lower == a[mdp.initial] and it.value_upper == it.upper[mdp.initial]
 
 
 def _value_iteration(mdp, goal: np.ndarray, sense: str) -> np.ndarray:
@@ -161,35 +174,35 @@ def _value_iteration(mdp, goal: np.ndarray, sense: str) -> np.ndarray:
 
 @pytest.mark.parametrize("sense", ["max", "min"])
 @pytest.mark.parametrize("seed", range(3))
-def test_folded_solve_brackets_value_iteration(seed: int, sense: str,
-                                               monkeypatch: pytest.MonkeyPatch) -> None:
-    """A product large enough that the bounds are held folded (checked): the restored
-    bounds still bracket value iteration's optimum, in both models."""
+def test_held_solve_brackets_value_iteration(seed: int, sense: str,
+                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """The records held on the quotient (checked), with the trim and the certificate's
+    large-product route on: the lifted bounds still bracket value iteration's optimum,
+    in both models."""
     mdp = random_mdp(600, seed=seed, locality=8, sink_fraction=0.15,
                      self_loop_fraction=0.3, target_fraction=0.1)
     sink = np.asarray(mdp.sink).copy()
     cut = sink & (np.arange(sink.size) % 3 == 0)
     mdp = replace(mdp, sink=sink & ~cut, truncated=cut)
-    made = []
-    held = _Folding.held
-
-    def spy(self, it, lp):
-        out = held(self, it, lp)
-        made.append(bool(out[2]) and all(f.whole is None for f in out[2].values()))
-        return out
-
-    monkeypatch.setattr(_Folding, "held", spy)
-    monkeypatch.setattr(plain, "FOLD_FROM_TRANSITIONS", 0)  # held folded whatever the size
+    monkeypatch.setattr(plain, "TRIM_FROM_TRANSITIONS", 0)  # the large product's route
     first, second = solve_models(mdp, Acceptance(np.asarray(mdp.target), None),
                                  Settings(), time.perf_counter(), sense)
-    assert made and all(made)  # every model's vectors were held folded
     target, truncated = np.asarray(mdp.target), np.asarray(mdp.truncated)
     for sol in (first, second):
+        it = sol.iteration
+        assert isinstance(it.held_lower, records.Lifted)
+        assert isinstance(sol.lp.held_values, records.Lifted)
         goal = target | truncated if sol.which == "upper" else target
         want = _value_iteration(mdp, goal, sense)
-        it = sol.iteration
         assert np.all(it.lower <= want + 1e-9), sol.which
         assert np.all(want <= it.upper + 1e-9), sol.which
+        # the certificate's bounds hold the optimum (either sense: a bound on the
+        # policy's value lies on the optimum's far side); a side not asked for is nan
+        lo, hi = sol.bounds
+        start = int(mdp.initial)
+        assert not (np.isnan(lo) and np.isnan(hi))
+        assert np.isnan(lo) or lo <= want[start] + 1e-12, (sol.which, lo, want[start])
+        assert np.isnan(hi) or want[start] <= hi + 1e-12, (sol.which, hi, want[start])
         assert sol.certified
 
 
@@ -197,14 +210,15 @@ def _bits(a: np.ndarray) -> np.ndarray:
     return np.asarray(a, dtype=np.float64).view(np.uint64)
 
 
+@pytest.mark.parametrize("trim_from", [10**18, 0])
 @pytest.mark.parametrize("sense", ["max", "min"])
 @pytest.mark.parametrize("truncated", [False, True])
-def test_held_whole_or_folded_the_same_answer(sense: str, truncated: bool,
-                                              monkeypatch: pytest.MonkeyPatch) -> None:
-    """Below FOLD_FROM_TRANSITIONS nothing is folded (no fold is made); from it, the
-    vectors are held folded.  Both ways give the same records, policy and certified
-    bounds to the bit, and those bracket value iteration's optimum (written in the
-    test)."""
+def test_held_or_eager_the_same_answer(sense: str, truncated: bool, trim_from: int,
+                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """The records held on the quotient, lifted at read, and the eager ones (lifted
+    when made: ``LIFT_AT_READ`` off), below and from the trim threshold: the same
+    records, policy and certified bounds to the bit, bracketing value iteration's
+    optimum (written in the test)."""
     mdp = random_mdp(600, seed=7, locality=8, sink_fraction=0.15,
                      self_loop_fraction=0.3, target_fraction=0.1)
     if truncated:
@@ -212,33 +226,30 @@ def test_held_whole_or_folded_the_same_answer(sense: str, truncated: bool,
         cut = sink & (np.arange(sink.size) % 3 == 0)
         mdp = replace(mdp, sink=sink & ~cut, truncated=cut)
     target = np.asarray(mdp.target)
-    folds: list[bool] = []
-    held = _Folding.held
-
-    def spy(self, it, lp):
-        out = held(self, it, lp)
-        folds.append(bool(out[2]) and all(f.whole is None for f in out[2].values()))
-        return out
-
-    monkeypatch.setattr(_Folding, "held", spy)
+    monkeypatch.setattr(plain, "TRIM_FROM_TRANSITIONS", trim_from)
     runs = []
-    for fold_from in (10**18, 0):
-        monkeypatch.setattr(plain, "FOLD_FROM_TRANSITIONS", fold_from)
+    for at_read in (False, True):
+        monkeypatch.setattr(records, "LIFT_AT_READ", at_read)
         runs.append(solve_models(mdp, Acceptance(target, None), Settings(),
                                  time.perf_counter(), sense))
-    # held (and so folded) only when folding is on: once a model
-    assert len(folds) == (2 if truncated else 1) and all(folds)
-    for unfolded, folded in zip(runs[0], runs[1], strict=True):
-        assert unfolded.which == folded.which
-        np.testing.assert_array_equal(unfolded.policy, folded.policy)
-        for a, b in ((unfolded.iteration.lower, folded.iteration.lower),
-                     (unfolded.iteration.upper, folded.iteration.upper),
-                     (unfolded.policy_values, folded.policy_values)):
+    assert len({id(m) for m in runs[0]}) == (2 if truncated else 1)
+    for eager, lazy in zip(runs[0], runs[1], strict=True):
+        assert isinstance(eager.iteration.held_lower, np.ndarray)
+        assert isinstance(lazy.iteration.held_lower, records.Lifted)
+        assert lazy.which == eager.which
+        np.testing.assert_array_equal(lazy.policy, eager.policy)
+        np.testing.assert_array_equal(lazy.lp.policy, eager.lp.policy)
+        for a, b in ((eager.iteration.lower, lazy.iteration.lower),
+                     (eager.iteration.upper, lazy.iteration.upper),
+                     (eager.lp.values, lazy.lp.values),
+                     (eager.policy_values, lazy.policy_values)):
             np.testing.assert_array_equal(_bits(a), _bits(b))
-        assert _bits(np.array(unfolded.bounds)).tolist() == _bits(
-            np.array(folded.bounds)).tolist()
-        goal = target | np.asarray(mdp.truncated) if folded.which == "upper" else target
+        numbers = [(m.value, *m.bounds, *m.bracket, m.lp.value, m.lp.dual_objective,
+                    m.iteration.value_lower, m.iteration.value_upper)
+                   for m in (eager, lazy)]
+        assert _bits(np.array(numbers[0])).tolist() == _bits(np.array(numbers[1])).tolist()
+        goal = target | np.asarray(mdp.truncated) if lazy.which == "upper" else target
         want = _value_iteration(mdp, goal, sense)
-        assert np.all(folded.iteration.lower <= want + 1e-9)
-        assert np.all(want <= folded.iteration.upper + 1e-9)
-        assert folded.certified and unfolded.certified
+        assert np.all(lazy.iteration.lower <= want + 1e-9)
+        assert np.all(want <= lazy.iteration.upper + 1e-9)
+        assert lazy.certified and eager.certified
