@@ -139,6 +139,11 @@ def test_held_vector_lifts_as_the_loop_and_reads_on_the_quotient(seed: int,
         kept = np.flatnonzero(q.state_map >= 0)
         np.testing.assert_array_equal(_bits(on[q.state_map[kept]]), _bits(want[kept]))
     assert v.on(q.state_map.copy()) is None  # another map: not read on the quotient
+    # read where gathered (the certificate's guess and fallback): the loop's entries
+    mask = rng.random(mdp.n_states) < 0.3
+    idx = np.flatnonzero(~mask)[::3]
+    for index in (mask, idx, slice(5, 77, 2), np.zeros(0, dtype=np.int64)):
+        np.testing.assert_array_equal(_bits(v[index]), _bits(want[index]))
 
 
 def test_records_hold_no_product_vector() -> None:

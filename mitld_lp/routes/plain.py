@@ -49,7 +49,7 @@ from mitld_lp.util.heap import release_free_memory
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
     from mitld_lp.routes.acceptance import Acceptance
     from mitld_lp.solvers.quotient import Qualitative, Quotient
-    from mitld_lp.solvers.result import IterationResult, LPResult, Status
+    from mitld_lp.solvers.result import IterationResult, Lifted, LPResult, Status
 
 __all__ = ["PlainRoute", "PlainPart", "ModelSolution", "solve_models", "solve_plain",
            "TRIM_BEFORE_LP_FROM", "TRIM_FROM_TRANSITIONS"]
@@ -145,7 +145,8 @@ def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
                layers: tuple[np.ndarray, np.ndarray], mec_of: np.ndarray | None,
                it: IterationResult, lp: LPResult | None, which: str,
                s: Settings, eta: float, complement: bool,
-               fallback: tuple[np.ndarray | None, np.ndarray | None]) -> ModelSolution:
+               fallback: tuple[np.ndarray | Lifted | None, np.ndarray | Lifted | None],
+               ) -> ModelSolution:
     """One model's answer and its certificate (module docs), on the product alone: the
     quotient's matrix is released by then.  Both bounds are checked on each model (the
     answer reads the lower model's lower one and the upper model's upper one), and that
@@ -156,8 +157,7 @@ def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
     come back optimal (after its own retries) is replaced by the interval-iteration
     policy when it failed numerically (``INACCURATE``, ``MAX_ITERATIONS``); the
     certificate is the same whatever policy it reads.  ``fallback``: the iteration's
-    lifted bounds the certificate reads (:func:`_read_by_certificate`; ``it`` holds
-    them on the quotient)."""
+    bounds the certificate reads (:func:`_read_by_certificate`: on the quotient)."""
     from mitld_lp.solvers.certify import certify
     from mitld_lp.solvers.result import Status, read_only
 
@@ -211,14 +211,15 @@ def _settled(it: IterationResult, lp: LPResult | None) -> IterationResult:
 
 
 def _read_by_certificate(it: IterationResult, sense: str,
-                         ) -> tuple[np.ndarray, np.ndarray | None]:
+                         ) -> tuple[np.ndarray | Lifted, np.ndarray | Lifted | None]:
     """The iteration's bounds the certificate reads (:func:`mitld_lp.solvers.certify.
-    certify`), lifted now from the quotient's values the record holds
-    (:class:`~mitld_lp.solvers.result.Lifted`), each freed when its certificate is
-    done: the lower one (the chain's guess, and a minimum's bound from below), the
-    upper one for a maximum (its bound from above; a minimum's certificate reads
-    none)."""
-    return it.lower, (it.upper if sense == "max" else None)
+    certify`) as the record holds them: on the quotient
+    (:class:`~mitld_lp.solvers.result.Lifted`), each read where the certificate reads
+    it (the chain's guess on its solved states, a candidate's fallback on its states),
+    never lifted whole: the lower one (the chain's guess, and a minimum's bound from
+    below), the upper one for a maximum (its bound from above; a minimum's certificate
+    reads none)."""
+    return it.held_lower, (it.held_upper if sense == "max" else None)
 
 
 def _trimmed(mdp: MDP, lp: LPResult | None) -> LPResult | None:

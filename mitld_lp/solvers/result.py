@@ -79,6 +79,19 @@ class Lifted:
                 out[self.one] = 1.0
         return read_only(out)
 
+    def __getitem__(self, index: np.ndarray | slice) -> np.ndarray:
+        """``self.lift()[index]`` (an index array, a mask or a slice of the product's
+        states), gathered for those states alone: the same floats."""
+        sm = self.state_map[index]
+        one = self.one[index]
+        if self.reduced.size == 0:
+            return np.where(one, 1.0, 0.0)
+        out = self.reduced[sm]
+        np.copyto(out, one, where=sm < 0)
+        if self.kept_forced:
+            out[one] = 1.0
+        return out
+
     def at(self, state: int) -> float:
         """The lifted vector's entry at ``state`` (no vector made)."""
         r = int(self.state_map[state])
