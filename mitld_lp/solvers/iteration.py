@@ -559,13 +559,16 @@ def _result(mdp: MDP, q: Quotient, bounds: np.ndarray, tol: float,
         else float(np.max(bounds[:, 1] - bounds[:, 0])))
     over = 0.0 if n == 0 or decided else _over(bounds, q, gap, tol, precision)
     status = budget.stopped or (Status.OPTIMAL if over < 1.0 else Status.MAX_ITERATIONS)
-    # greedy on a maximum's lower, a minimum's upper bound, at its first read (a copy)
-    known = (bounds[:, 0] if q.sense is Sense.MAX else bounds[:, 1]).copy()
-    # held on the quotient, lifted where read (Lifted): the ones the graph decides set
-    # to 1 at the lift, where the quotient keeps any
-    one = np.asarray(q.qualitative.one)
-    lower = held(bounds[:, 0], q.state_map, one, forced=True)
-    upper = held(bounds[:, 1], q.state_map, one, forced=True)
+    # greedy on a maximum's lower, a minimum's upper bound, at its first read (the
+    # column the record holds, read-only: the pass writes its bounds no more)
+    known = bounds[:, 0] if q.sense is Sense.MAX else bounds[:, 1]
+    # held on the quotient, lifted where read (Lifted), the ones the graph decides set
+    # to 1 at the lift where the quotient keeps any; the columns of the pass's bounds
+    # held as they are (its models' records hold every column)
+    one = np.asarray(q.qualitative.one, dtype=bool)
+    kept = n > 0 and bool(np.any(one & (q.state_map >= 0)))
+    lower = held(bounds[:, 0], q.state_map, one, forced=True, kept=kept, own=False)
+    upper = held(bounds[:, 1], q.state_map, one, forced=True, kept=kept, own=False)
     threshold = f"tol {tol:.1e}" + ("" if precision is None else
                                     f" and {precision:.0e} of the lower bound")
     message = (

@@ -55,16 +55,21 @@ class Lifted:
 
     @staticmethod
     def of(reduced: np.ndarray, state_map: np.ndarray, one: np.ndarray,
-           forced: bool = False) -> Lifted:
-        """``reduced`` (float64, read-only: a copy where it is a view into another
-        array, whose rest the record would hold) to be lifted by ``state_map`` and
-        ``one``; ``forced``: every state of ``one`` set to 1 after the gather."""
+           forced: bool = False, *, kept: bool | None = None, own: bool = True,
+           ) -> Lifted:
+        """``reduced`` (float64, read-only) to be lifted by ``state_map`` and ``one``;
+        ``forced``: every state of ``one`` set to 1 after the gather (``kept``: whether
+        the quotient keeps such a state, where the caller knows; else looked up).
+        ``own``: a view into another array is copied (the record would hold the rest
+        of it); False: held as it is (the interval iteration's columns of its bounds,
+        all of which its records hold)."""
         values = np.asarray(reduced, dtype=np.float64)
-        if values.base is not None or not values.flags.c_contiguous:
+        if own and (values.base is not None or not values.flags.c_contiguous):
             values = values.copy()
         one = np.asarray(one, dtype=bool)
-        kept = forced and values.size > 0 and bool(np.any(state_map[one] >= 0))
-        return Lifted(read_only(values), state_map, one, forced, kept)
+        if kept is None:
+            kept = forced and values.size > 0 and bool(np.any(one & (state_map >= 0)))
+        return Lifted(read_only(values), state_map, one, forced, forced and kept)
 
     def lift(self) -> np.ndarray:
         """The product's vector, a fresh read-only array at each call (to the bit the
@@ -114,10 +119,11 @@ class Lifted:
 
 
 def held(reduced: np.ndarray, state_map: np.ndarray, one: np.ndarray,
-         forced: bool = False) -> np.ndarray | Lifted:
+         forced: bool = False, *, kept: bool | None = None, own: bool = True,
+         ) -> np.ndarray | Lifted:
     """A record's vector of the quotient's values ``reduced`` (:meth:`Lifted.of`): held
     so and lifted at each read, or lifted now where :data:`LIFT_AT_READ` is False."""
-    v = Lifted.of(reduced, state_map, one, forced)
+    v = Lifted.of(reduced, state_map, one, forced, kept=kept, own=own)
     return v if LIFT_AT_READ else v.lift()
 
 
