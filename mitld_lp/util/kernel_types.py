@@ -20,8 +20,10 @@ def type_key(args: tuple) -> tuple | None:
     out: list[tuple] = []
     for a in args:
         t = type(a)
-        if t is np.ndarray:
-            part = _array_part(a)
+        if t is np.ndarray:  # (_array_part's lookup, inline: a call an array saved)
+            part = _PARTS.get((a.dtype, a.ndim, a.flags.num & _READ_FLAGS), _MISSING)
+            if part is _MISSING:
+                part = _array_part(a)
         elif t is int:
             part = _INT if -(2 ** 63) <= a < 2 ** 63 else None
         else:
