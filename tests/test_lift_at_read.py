@@ -154,6 +154,9 @@ def test_records_hold_no_product_vector() -> None:
     for v in (it.held_lower, it.held_upper):
         assert isinstance(v, records.Lifted)
         assert v.reduced.shape == (q.n_states,) and v.state_map is q.state_map
+        # its own contiguous copy, not a column of the pass's bounds: a strided vector
+        # is another type to the compiled kernels that read it (a compile in a solve)
+        assert v.reduced.flags.c_contiguous and v.reduced.base is None
     a, b = it.lower, it.lower
     assert a is not b  # lifted at each read, not kept
     np.testing.assert_array_equal(_bits(a), _bits(b))

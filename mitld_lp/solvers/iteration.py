@@ -91,7 +91,7 @@ from mitld_lp.solvers.level_first import FirstBounds
 from mitld_lp.solvers.policy_jump import jump
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices
-from mitld_lp.solvers.result import IterationResult, Status, entry, held
+from mitld_lp.solvers.result import IterationResult, Lifted, Status, entry, held
 from mitld_lp.solvers.shared_levels import RUNS_MIN_LEVELS, shared_levels, walk_handing
 from mitld_lp.solvers.sweep_forecast import close_out
 from mitld_lp.solvers.sweep_forecast import needed as _needed
@@ -559,16 +559,19 @@ def _result(mdp: MDP, q: Quotient, bounds: np.ndarray, tol: float,
         else float(np.max(bounds[:, 1] - bounds[:, 0])))
     over = 0.0 if n == 0 or decided else _over(bounds, q, gap, tol, precision)
     status = budget.stopped or (Status.OPTIMAL if over < 1.0 else Status.MAX_ITERATIONS)
-    # greedy on a maximum's lower, a minimum's upper bound, at its first read (the
-    # column the record holds, read-only: the pass writes its bounds no more)
-    known = bounds[:, 0] if q.sense is Sense.MAX else bounds[:, 1]
     # held on the quotient, lifted where read (Lifted), the ones the graph decides set
-    # to 1 at the lift where the quotient keeps any; the columns of the pass's bounds
-    # held as they are (its models' records hold every column)
+    # to 1 at the lift where the quotient keeps any (looked up once a model); each
+    # column copied: contiguous, as the kernels that read it are compiled for (a
+    # strided view is another numba type: a compile mid-solve)
     one = np.asarray(q.qualitative.one, dtype=bool)
     kept = n > 0 and bool(np.any(one & (q.state_map >= 0)))
-    lower = held(bounds[:, 0], q.state_map, one, forced=True, kept=kept, own=False)
-    upper = held(bounds[:, 1], q.state_map, one, forced=True, kept=kept, own=False)
+    lower = held(bounds[:, 0], q.state_map, one, forced=True, kept=kept)
+    upper = held(bounds[:, 1], q.state_map, one, forced=True, kept=kept)
+    # greedy on a maximum's lower, a minimum's upper bound, at its first read: the
+    # copy the record holds (else one of its own)
+    side = 0 if q.sense is Sense.MAX else 1
+    known = (lower, upper)[side]
+    known = known.reduced if isinstance(known, Lifted) else bounds[:, side].copy()
     threshold = f"tol {tol:.1e}" + ("" if precision is None else
                                     f" and {precision:.0e} of the lower bound")
     message = (

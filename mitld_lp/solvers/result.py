@@ -55,16 +55,15 @@ class Lifted:
 
     @staticmethod
     def of(reduced: np.ndarray, state_map: np.ndarray, one: np.ndarray,
-           forced: bool = False, *, kept: bool | None = None, own: bool = True,
-           ) -> Lifted:
+           forced: bool = False, *, kept: bool | None = None) -> Lifted:
         """``reduced`` (float64, read-only) to be lifted by ``state_map`` and ``one``;
         ``forced``: every state of ``one`` set to 1 after the gather (``kept``: whether
-        the quotient keeps such a state, where the caller knows; else looked up).
-        ``own``: a view into another array is copied (the record would hold the rest
-        of it); False: held as it is (the interval iteration's columns of its bounds,
-        all of which its records hold)."""
+        the quotient keeps such a state, where the caller knows; else looked up).  A
+        view into another array is copied, C-contiguous: the record would hold the
+        rest of it, and a strided vector is another type to a compiled kernel that
+        reads it (a compile in a solve)."""
         values = np.asarray(reduced, dtype=np.float64)
-        if own and (values.base is not None or not values.flags.c_contiguous):
+        if values.base is not None or not values.flags.c_contiguous:
             values = values.copy()
         one = np.asarray(one, dtype=bool)
         if kept is None:
@@ -119,11 +118,10 @@ class Lifted:
 
 
 def held(reduced: np.ndarray, state_map: np.ndarray, one: np.ndarray,
-         forced: bool = False, *, kept: bool | None = None, own: bool = True,
-         ) -> np.ndarray | Lifted:
+         forced: bool = False, *, kept: bool | None = None) -> np.ndarray | Lifted:
     """A record's vector of the quotient's values ``reduced`` (:meth:`Lifted.of`): held
     so and lifted at each read, or lifted now where :data:`LIFT_AT_READ` is False."""
-    v = Lifted.of(reduced, state_map, one, forced, kept=kept, own=own)
+    v = Lifted.of(reduced, state_map, one, forced, kept=kept)
     return v if LIFT_AT_READ else v.lift()
 
 
