@@ -49,10 +49,10 @@ from mitld_lp.util.heap import release_free_memory
 if TYPE_CHECKING:  # the solver stack is imported when a solve needs it (package docs)
     from mitld_lp.routes.acceptance import Acceptance
     from mitld_lp.solvers.quotient import Qualitative, Quotient
-    from mitld_lp.solvers.result import IterationResult, LPResult, Status
+    from mitld_lp.solvers.result import IterationResult, Lifted, LPResult, Status
 
 __all__ = ["PlainRoute", "PlainPart", "ModelSolution", "solve_models", "solve_plain",
-           "FOLD_FROM_TRANSITIONS", "TRIM_BEFORE_LP_FROM", "TRIM_FROM_TRANSITIONS"]
+           "TRIM_BEFORE_LP_FROM", "TRIM_FROM_TRANSITIONS"]
 
 log = logging.getLogger(__name__)
 
@@ -73,13 +73,6 @@ TRIM_FROM_TRANSITIONS = 1_000_000
 #: saved too little.
 TRIM_BEFORE_LP_FROM = TRIM_FROM_TRANSITIONS
 
-#: The product size from which the lifted bounds are held folded through the
-#: certificates (:class:`_Folding`): the builder's threshold, for the same reason (below
-#: it the process's heap is tens of megabytes, and the bytes-a-transition target is read
-#: from a million transitions).  A fold and its unfold are two gathers over the product's
-#: states a vector: QVBS firewire_dl 3-600 (197,013 transitions) spent 3-4 ms of its
-#: 0.08 s solve on them (profiled), to hold 2.7 MB less through its certificate.
-FOLD_FROM_TRANSITIONS = TRIM_FROM_TRANSITIONS
 
 @dataclass(frozen=True, slots=True, eq=False)
 class ModelSolution:
@@ -138,7 +131,8 @@ def _solve_lp(mdp: MDP, quotient: Quotient, it: IterationResult, s: Settings,
                     sense=quotient.sense, solver=s.solver, backend=s.backend,
                     tol=s.tol, precision=s.precision,
                     layout="blocks" if s.decompose is not False else "whole",
-                    time_limit=deadline.left(), bounds=(it.lower, it.upper),
+                    time_limit=deadline.left(),
+                    bounds=(it.held_lower, it.held_upper),  # read on the quotient
                     everywhere=quotient.initial < 0, progress=s.progress,
                     flows=False,  # nothing reads a model's occupancy: not at the peak
                     primal=primal,
@@ -151,7 +145,8 @@ def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
                layers: tuple[np.ndarray, np.ndarray], mec_of: np.ndarray | None,
                it: IterationResult, lp: LPResult | None, which: str,
                s: Settings, eta: float, complement: bool,
-               fallback: tuple[np.ndarray | None, np.ndarray | None]) -> ModelSolution:
+               fallback: tuple[np.ndarray | Lifted | None, np.ndarray | Lifted | None],
+               ) -> ModelSolution:
     """One model's answer and its certificate (module docs), on the product alone: the
     quotient's matrix is released by then.  Both bounds are checked on each model (the
     answer reads the lower model's lower one and the upper model's upper one), and that
@@ -162,8 +157,7 @@ def _certified(mdp: MDP, target: np.ndarray, decided: Qualitative,
     come back optimal (after its own retries) is replaced by the interval-iteration
     policy when it failed numerically (``INACCURATE``, ``MAX_ITERATIONS``); the
     certificate is the same whatever policy it reads.  ``fallback``: the iteration's
-    lifted bounds the certificate reads (:func:`_read_by_certificate`; ``it`` may hold
-    them folded, :class:`_Folded`)."""
+    bounds the certificate reads (:func:`_read_by_certificate`: on the quotient)."""
     from mitld_lp.solvers.certify import certify
     from mitld_lp.solvers.result import Status, read_only
 
@@ -216,110 +210,16 @@ def _settled(it: IterationResult, lp: LPResult | None) -> IterationResult:
     return it
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class _Folded:
-    """A vector a product state held as its quotient's values (``reduced``: lifted by
-    the state map, the removed states' qualitative ones) and the entries that lift
-    differently (``at``, ``patch``), or as itself (``whole``); :meth:`unfold` gives it
-    back to the bit."""
-
-    whole: np.ndarray | None
-    reduced: np.ndarray | None = None
-    at: np.ndarray | None = None
-    patch: np.ndarray | None = None
-    state_map: np.ndarray | None = None
-    one: np.ndarray | None = None
-
-    def unfold(self) -> np.ndarray:
-        from mitld_lp.solvers.result import read_only
-
-        if self.whole is not None:
-            return self.whole
-        out = _lift(self.reduced, self.state_map, self.one)
-        out[self.at] = self.patch
-        return read_only(out)
-
-
-def _lift(reduced: np.ndarray, state_map: np.ndarray, one: np.ndarray) -> np.ndarray:
-    """``Quotient.lift``'s gather (a removed state, ``-1``, reads the last value and is
-    overwritten by its qualitative value)."""
-    if reduced.size == 0:
-        return np.where(one, 1.0, 0.0)
-    out = reduced[state_map]
-    np.copyto(out, one, where=state_map < 0)
-    return out
-
-
-@dataclass(frozen=True, slots=True)
-class _Folding:
-    """What lifts a quotient's values to the product once the quotient is released: its
-    state map and the removed states of value 1."""
-
-    state_map: np.ndarray
-    one: np.ndarray
-    n_reduced: int
-
-    @staticmethod
-    def of(q: Quotient) -> _Folding:
-        return _Folding(q.state_map, np.asarray(q.qualitative.one), q.n_states)
-
-    def fold(self, x: np.ndarray) -> _Folded:
-        """``x`` folded (its value on one state of each reduced state's, the entries the
-        lift misses as a patch), if that is smaller than ``x`` itself."""
-        kept = np.flatnonzero(self.state_map >= 0)
-        reduced = np.zeros(self.n_reduced)
-        reduced[self.state_map[kept]] = x[kept]
-        del kept
-        back = _lift(reduced, self.state_map, self.one)
-        at = np.flatnonzero(back.view(np.uint64) != np.asarray(x).view(np.uint64))
-        del back
-        if reduced.nbytes + at.nbytes + 8 * at.size >= x.nbytes:
-            return _Folded(x)
-        return _Folded(None, reduced, at, np.asarray(x)[at], self.state_map, self.one)
-
-    def held(self, it: IterationResult, lp: LPResult | None,
-             ) -> tuple[IterationResult, LPResult | None, dict[str, _Folded]]:
-        """The records without their lifted vectors, and those folded (:meth:`fold`),
-        where folding saves more than the state map it keeps; else as they are."""
-        vectors = {"lower": it.lower, "upper": it.upper}
-        if lp is not None and lp.values is not None:
-            vectors["values"] = lp.values
-        folded = {k: self.fold(np.asarray(v, dtype=np.float64)) if
-                  np.asarray(v).dtype == np.float64 and v.shape == self.state_map.shape
-                  else _Folded(v) for k, v in vectors.items()}
-        saved = sum(v.nbytes - (0 if f.whole is None else f.whole.nbytes) -
-                    (0 if f.reduced is None else f.reduced.nbytes + 16 * f.at.size)
-                    for v, f in zip(vectors.values(), folded.values(), strict=True))
-        if saved <= self.state_map.nbytes:
-            return it, lp, {}
-        del vectors
-        it = replace(it, lower=None, upper=None)
-        if "values" in folded:
-            lp = replace(lp, values=None)
-        return it, lp, folded
-
-
-def _read_by_certificate(it: IterationResult, folded: dict[str, _Folded], sense: str,
-                         ) -> tuple[np.ndarray | None, np.ndarray | None]:
+def _read_by_certificate(it: IterationResult, sense: str,
+                         ) -> tuple[np.ndarray | Lifted, np.ndarray | Lifted | None]:
     """The iteration's bounds the certificate reads (:func:`mitld_lp.solvers.certify.
-    certify`), lifted: the lower one (the chain's guess, and a minimum's bound from
-    below), the upper one for a maximum (its bound from above); ``folded`` empty: the
-    record ``it`` holds them whole."""
-    if not folded:
-        return it.lower, it.upper
-    return (folded["lower"].unfold(),
-            folded["upper"].unfold() if sense == "max" else None)
-
-
-def _unfolded(sol: ModelSolution, folded: dict[str, _Folded]) -> ModelSolution:
-    """``sol`` with its records' lifted vectors back (to the bit)."""
-    if not folded:
-        return sol
-    it = replace(sol.iteration, lower=folded["lower"].unfold(),
-                 upper=folded["upper"].unfold())
-    lp = sol.lp if "values" not in folded else replace(sol.lp,
-                                                        values=folded["values"].unfold())
-    return replace(sol, iteration=it, lp=lp)
+    certify`) as the record holds them: on the quotient
+    (:class:`~mitld_lp.solvers.result.Lifted`), each read where the certificate reads
+    it (the chain's guess on its solved states, a candidate's fallback on its states),
+    never lifted whole: the lower one (the chain's guess, and a minimum's bound from
+    below), the upper one for a maximum (its bound from above; a minimum's certificate
+    reads none)."""
+    return it.held_lower, (it.held_upper if sense == "max" else None)
 
 
 def _trimmed(mdp: MDP, lp: LPResult | None) -> LPResult | None:
@@ -417,20 +317,14 @@ def solve_models(mdp: MDP, accept: Acceptance, s: Settings, t0: float,
     kept = [(np.asarray(q.target), q.qualitative, q.layers,
              None if q.sense is Sense.MIN else q.mecs.mec_of) for q in quotients]
     its = [_settled(it, lp) for it, lp in zip(its, lps, strict=True)]
-    # the lifted bounds (a float a product state each: the iteration's two, the LP's
-    # values) held through the certificates as their quotient's values where that is
-    # smaller, each lifted back only while a certificate reads it, all of them after
-    held = [_Folding.of(q).held(it, lp) if mdp.n_transitions >= FOLD_FROM_TRANSITIONS
-            else (it, lp, {})
-            for q, it, lp in zip(quotients, its, lps, strict=True)]
+    # the records hold their bounds and values as the quotient's (a float a reduced
+    # state: Lifted); the certificate's are lifted as it reads them
+    held = list(zip(its, lps, strict=True))
     del quotients, its, lps
     eta = ETA if eta is None else eta
-    solutions = []
-    for k, (it, lp, folded), which in zip(kept, held, ("lower", "upper"), strict=False):
-        sol = _certified(mdp, *k, it, lp, which, s, eta, complement,
-                         _read_by_certificate(it, folded, str(k[1].sense)))
-        solutions.append((sol, folded))
-    solutions = [_unfolded(sol, folded) for sol, folded in solutions]
+    solutions = [_certified(mdp, *k, it, lp, which, s, eta, complement,
+                            _read_by_certificate(it, str(k[1].sense)))
+                 for k, (it, lp), which in zip(kept, held, ("lower", "upper"), strict=False)]
     low, high = solutions[0], solutions[-1]  # one model when nothing is truncated
     if Sense(sense) is Sense.MIN:  # the controller plays the upper model's policy
         low, high = high, low

@@ -76,7 +76,7 @@ from mitld_lp.solvers.certify_repair import (
     repair_levels,
 )
 from mitld_lp.solvers.chain_levels import forget
-from mitld_lp.solvers.result import read_only
+from mitld_lp.solvers.result import Lifted, read_only
 from mitld_lp.solvers.rounding import (
     ETA,
     HAZARD_ACCURACY,
@@ -356,7 +356,8 @@ def _optimum_side(st: Rows, initial: int, ch: Chain, rnd: Rounding, *, upper: bo
     if fallback is not None:
         def from_iteration() -> np.ndarray:
             x = candidate(scales()[-1])
-            f = np.asarray(fallback, dtype=np.float64)
+            f = fallback if isinstance(fallback, Lifted) else np.asarray(fallback,
+                                                                         dtype=np.float64)
             live = ~free
             if upper:
                 x[live] = np.minimum(np.maximum(x[live], f[live] * (1.0 + 2.0**-30)), 1.0)
@@ -521,7 +522,8 @@ def certify(mdp: MDP, target: np.ndarray, policy: np.ndarray, *, sense: str = "m
     no policy reaches the target); ``sense="min"``: ``lower`` bounds the minimum
     (``zero``: the states from which some policy avoids the target for ever; ``one``:
     those from which every policy reaches it), ``upper`` the policy's value.
-    ``sides``: which bounds to check; ``fallback_*``: the iteration's vectors.  With
+    ``sides``: which bounds to check; ``fallback_*``: the iteration's vectors (arrays, or
+    :class:`~mitld_lp.solvers.result.Lifted` read where used).  With
     both sides and a ``precision``, one more check: the policy is within that
     precision of the optimum in every state (:func:`everywhere`; ``complement``: the
     answer is ``1 -`` these values, the precision relative to that).  ``trim``: the

@@ -17,7 +17,7 @@ from mitld_lp.solvers.certify_compiled import (
 )
 from mitld_lp.solvers.chain_levels import walk_of
 from mitld_lp.solvers.graph import Blocks, Reversed, attractor, blocks_from, graph_view, levels
-from mitld_lp.solvers.result import read_only
+from mitld_lp.solvers.result import Lifted, read_only
 from mitld_lp.solvers.rounding import Rounding
 from mitld_lp.solvers.rows import gather_ranges, row_columns, row_entries
 from mitld_lp.solvers.topological import level_kernels
@@ -348,7 +348,8 @@ class _Gathered:
     __slots__ = ("full", "idx")
 
     def __init__(self, full: np.ndarray, idx: np.ndarray) -> None:
-        self.full, self.idx = np.asarray(full, dtype=np.float64), idx
+        self.full = full if isinstance(full, Lifted) else np.asarray(full, dtype=np.float64)
+        self.idx = idx  # (a Lifted vector read where gathered: lift-84)
 
     def __getitem__(self, at: np.ndarray | slice) -> np.ndarray:
         return self.full[self.idx[at]]

@@ -91,7 +91,7 @@ from mitld_lp.solvers.level_first import FirstBounds
 from mitld_lp.solvers.policy_jump import jump
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices
-from mitld_lp.solvers.result import IterationResult, Status, read_only
+from mitld_lp.solvers.result import IterationResult, Lifted, Status, entry, held
 from mitld_lp.solvers.shared_levels import RUNS_MIN_LEVELS, shared_levels, walk_handing
 from mitld_lp.solvers.sweep_forecast import close_out
 from mitld_lp.solvers.sweep_forecast import needed as _needed
@@ -559,11 +559,19 @@ def _result(mdp: MDP, q: Quotient, bounds: np.ndarray, tol: float,
         else float(np.max(bounds[:, 1] - bounds[:, 0])))
     over = 0.0 if n == 0 or decided else _over(bounds, q, gap, tol, precision)
     status = budget.stopped or (Status.OPTIMAL if over < 1.0 else Status.MAX_ITERATIONS)
-    # greedy on a maximum's lower, a minimum's upper bound, at its first read (a copy)
-    known = (bounds[:, 0] if q.sense is Sense.MAX else bounds[:, 1]).copy()
-    one = np.asarray(q.qualitative.one)
-    lower, upper = q.lift(bounds[:, 0]), q.lift(bounds[:, 1])  # fresh arrays: the
-    lower[one] = upper[one] = 1.0  # ones set in place (no third array a state each)
+    # held on the quotient, lifted where read (Lifted), the ones the graph decides set
+    # to 1 at the lift where the quotient keeps any (looked up once a model); each
+    # column copied: contiguous, as the kernels that read it are compiled for (a
+    # strided view is another numba type: a compile mid-solve)
+    one = np.asarray(q.qualitative.one, dtype=bool)
+    kept = n > 0 and bool(np.any(one & (q.state_map >= 0)))
+    lower = held(bounds[:, 0], q.state_map, one, forced=True, kept=kept)
+    upper = held(bounds[:, 1], q.state_map, one, forced=True, kept=kept)
+    # greedy on a maximum's lower, a minimum's upper bound, at its first read: the
+    # copy the record holds (else one of its own)
+    side = 0 if q.sense is Sense.MAX else 1
+    known = (lower, upper)[side]
+    known = known.reduced if isinstance(known, Lifted) else bounds[:, side].copy()
     threshold = f"tol {tol:.1e}" + ("" if precision is None else
                                     f" and {precision:.0e} of the lower bound")
     message = (
@@ -574,10 +582,10 @@ def _result(mdp: MDP, q: Quotient, bounds: np.ndarray, tol: float,
     logger.info("interval iteration: %s, %.3fs", message, seconds)
     return IterationResult(
         status=status,
-        lower=read_only(lower),
-        upper=read_only(upper),
-        value_lower=float(lower[mdp.initial]),
-        value_upper=float(upper[mdp.initial]),
+        held_lower=lower,
+        held_upper=upper,
+        value_lower=entry(lower, mdp.initial),
+        value_upper=entry(upper, mdp.initial),
         iterations=budget.iterations,
         seconds=seconds,
         greedy=lambda: lift_policy(mdp, q, greedy_choices(q, known) if n else

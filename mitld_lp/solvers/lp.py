@@ -79,7 +79,15 @@ from mitld_lp.solvers.lp_blocks import (
 from mitld_lp.solvers.options import Deadline, Layout, SolveOptions
 from mitld_lp.solvers.quotient import lift_policy, quotient_for
 from mitld_lp.solvers.reduced import Quotient, greedy_choices, keeping_zero
-from mitld_lp.solvers.result import LPResult, Status, read_only
+from mitld_lp.solvers.result import (
+    Lifted,
+    LPResult,
+    Status,
+    entry,
+    held,
+    lifted,
+    read_only,
+)
 from mitld_lp.solvers.shared_levels import handed
 from mitld_lp.util.arrays import SLICE_STATES, spread
 
@@ -260,7 +268,7 @@ def solve_lp(
     layout: Layout | str = Layout.BLOCKS,
     time_limit: float | None = None,
     solver_options: Mapping[str, Any] | None = None,
-    bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    bounds: tuple[np.ndarray | Lifted, np.ndarray | Lifted] | None = None,
     progress: bool | None = None,
     greedy: bool = True,
     flows: bool = True,
@@ -347,7 +355,7 @@ def solve_lp(
     def failed(raw: Raw) -> LPResult:
         logger.warning("LP not solved: %s", raw.message)
         return LPResult(
-            status=raw.status, message=raw.message, value=float("nan"), values=None,
+            status=raw.status, message=raw.message, value=float("nan"), held_values=None,
             primal_objective=float("nan"), dual_objective=float("nan"), occupancy=None,
             policy=None, randomized=None, solver=solver, backend=backend,
             iterations=raw.iterations, seconds=time.perf_counter() - start, lp_shape=shape,
@@ -422,18 +430,24 @@ def _from_iteration(q: Quotient, b_eq: Any, primal: bool = True) -> Answer | Non
                   primal_objective(q, y), float(np.einsum("i,i->", b_eq, values)), 0)
 
 
-def _reduced_bounds(q: Quotient, bounds: tuple[np.ndarray, np.ndarray] | None,
-                   ) -> tuple[OnReduced, OnReduced] | None:
+def _reduced_bounds(q: Quotient,
+                    bounds: tuple[np.ndarray | Lifted, np.ndarray | Lifted] | None,
+                    ) -> tuple[OnReduced | np.ndarray, OnReduced | np.ndarray] | None:
     """Per-state ``bounds`` read on the reduced states (a collapsed end component's
-    members share their value, so any member speaks for it), each gathered where a block
-    indexes it (:class:`OnReduced`): one index a reduced state held, not two floats."""
+    members share their value, so any member speaks for it): a bound held on this
+    quotient (:meth:`Lifted.on`) as its reduced vector, the same floats; else each
+    gathered where a block indexes it (:class:`OnReduced`: one index a reduced state
+    held, not two floats), a held one lifted first."""
     if bounds is None:
         return None
+    on = [b.on(q.state_map) if isinstance(b, Lifted) else None for b in bounds]
+    if on[0] is not None and on[1] is not None:
+        return on[0], on[1]
     kept = np.flatnonzero(q.state_map >= 0)
     rep = np.zeros(q.n_states, dtype=np.int32 if q.state_map.size < 2**31 else np.int64)
     rep[q.state_map[kept]] = kept
     del kept
-    lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+    lo, hi = (np.asarray(lifted(b), dtype=np.float64) for b in bounds)
     if lo.shape != q.state_map.shape or hi.shape != q.state_map.shape:
         raise ValueError(f"bounds: expected two arrays of shape {q.state_map.shape}")
     return OnReduced(lo, rep), OnReduced(hi, rep)
@@ -471,9 +485,11 @@ def _result(mdp: MDP, q: Quotient, taken: list[Answer], settings: SolveOptions,
     del answer
     if not flows:  # the flow (a float a reduced choice) freed before the lifts: they
         del y  # were the LP stage's resident peak on bus_scaled n64 d3 with it alive
-    values = q.lift(v)
+    # held on the quotient, lifted where read (Lifted: the certificate does not read
+    # them; the plain route's records keep a float a reduced state)
+    values = held(v, q.state_map, q.qualitative.one)
     del v
-    value = q.initial_value if q.initial < 0 else float(values[mdp.initial])
+    value = q.initial_value if q.initial < 0 else entry(values, mdp.initial)
     policy = lift_policy(mdp, q, reduced_choice)
     del reduced_choice
     occupancy = randomized = None
@@ -491,7 +507,7 @@ def _result(mdp: MDP, q: Quotient, taken: list[Answer], settings: SolveOptions,
         status=raw.status,
         message=raw.message,
         value=value,
-        values=read_only(values),
+        held_values=values,
         primal_objective=primal,
         dual_objective=dual,
         occupancy=occupancy,

@@ -7,37 +7,71 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["sample_args", "type_key"]
+__all__ = ["array_part", "sample_args", "type_key"]
 
 
 def type_key(args: tuple) -> tuple | None:
     """numba's type of each argument as NumPy gives it (``numba.typeof``'s inputs: an
     array's dtype, dimensions, layout C / F / A, read-only and aligned flags; a Python
     bool, int (int64) or float; a NumPy scalar's dtype), or None for anything else
-    (numba's dispatcher then decides)."""
+    (numba's dispatcher then decides).  An array's part is looked up by its dtype,
+    dimensions and the four flags it reads (:func:`_array_part`): a kernel call's key
+    is made once a solve's many calls (4 us an argument, built, against 1 looked up)."""
     out: list[tuple] = []
     for a in args:
         t = type(a)
-        if t is np.ndarray:
-            dt = a.dtype
-            if dt.kind not in "biufc" or not dt.isnative or dt.fields is not None:
-                return None
-            f = a.flags
-            layout = "C" if f.c_contiguous else "F" if f.f_contiguous else "A"
-            out.append(("array", dt.str, a.ndim, layout, not f.writeable, f.aligned))
-        elif t is bool or t is np.bool_:
-            out.append((t.__name__,))
+        if t is np.ndarray:  # (_array_part's lookup, inline: a call an array saved)
+            part = _PARTS.get((a.dtype, a.ndim, a.flags.num & _READ_FLAGS), _MISSING)
+            if part is _MISSING:
+                part = _array_part(a)
         elif t is int:
-            if not -(2 ** 63) <= a < 2 ** 63:
-                return None
-            out.append(("int",))
-        elif t is float:
-            out.append(("float",))
-        elif isinstance(a, np.generic) and a.dtype.kind in "iuf" and a.dtype.isnative:
-            out.append(("scalar", a.dtype.str))
+            part = _INT if -(2 ** 63) <= a < 2 ** 63 else None
         else:
+            part = _SCALARS.get(t)
+            if part is None and isinstance(a, np.generic) and a.dtype.kind in "iuf" \
+                    and a.dtype.isnative:
+                part = ("scalar", a.dtype.str)
+        if part is None:
             return None
+        out.append(part)
     return tuple(out)
+
+
+_INT = ("int",)
+# a Python bool or float, NumPy's bool (its type's name: "bool" in NumPy 2): their parts
+_SCALARS: dict[type, tuple] = {bool: ("bool",), np.bool_: (np.bool_.__name__,),
+                              float: ("float",)}
+
+
+# NumPy's flag bits (its C API's NPY_ARRAY_*, the value of ``ndarray.flags.num``) of
+# what an array's part reads: C and F contiguous, aligned, writeable
+_READ_FLAGS = 0x0001 | 0x0002 | 0x0100 | 0x0400
+_PARTS: dict[tuple, tuple | None] = {}  # (dtype, ndim, read flags) -> the array's part
+_MISSING = object()
+
+
+def _array_part(a: np.ndarray) -> tuple | None:
+    """:func:`array_part` of ``a``, kept by what it is made of (its dtype, dimensions
+    and :data:`_READ_FLAGS`): the same tuple for the same inputs."""
+    k = (a.dtype, a.ndim, a.flags.num & _READ_FLAGS)
+    part = _PARTS.get(k, _MISSING)
+    if part is _MISSING:
+        part = array_part(a)
+        if len(_PARTS) < 4096:  # a few dozen in a process; never grown without end
+            _PARTS[k] = part
+    return part  # type: ignore[return-value]
+
+
+def array_part(a: np.ndarray) -> tuple | None:
+    """An array's part of :func:`type_key`, made from its dtype and flags: its dtype's
+    string, dimensions, layout (C, F, else A), read-only and aligned flags; None for a
+    dtype numba's kernels here are not typed for (structured, non-native, object)."""
+    dt = a.dtype
+    if dt.kind not in "biufc" or not dt.isnative or dt.fields is not None:
+        return None
+    f = a.flags
+    layout = "C" if f.c_contiguous else "F" if f.f_contiguous else "A"
+    return ("array", dt.str, a.ndim, layout, not f.writeable, f.aligned)
 
 
 def sample_args(key: tuple) -> tuple:
