@@ -55,6 +55,7 @@ from mitld_lp.sensing.rows import (
     Lookup,
     compiled_on,
     groups,
+    grown,
     join_parts,
     lex_order,
     load_kernels,
@@ -249,10 +250,12 @@ class FrontierBuilder(StepRules):
         starts = self.n_hyps + np.cumsum(counts) - counts
         self.cols.extend((world, clock, reported, pending, starts, counts))
         end = self.n_hyps + len(codes)
-        if end > len(self.hyp_code):
+        if end > len(self.hyp_code):  # by doubling; the tail never written (no page
+            # of it touched: np.resize filled it, 7.8 bytes a transition resident on
+            # issue 45's sensed case where 3.6 of them held no hypothesis)
             size = max(end, 2 * len(self.hyp_code))
-            self.hyp_code = np.resize(self.hyp_code, size)
-            self.hyp_weight = np.resize(self.hyp_weight, size)
+            self.hyp_code = grown(self.hyp_code, self.n_hyps, size)
+            self.hyp_weight = grown(self.hyp_weight, self.n_hyps, size)
         self.hyp_code[self.n_hyps:end] = codes
         self.hyp_weight[self.n_hyps:end] = weights
         self.n_hyps = end
