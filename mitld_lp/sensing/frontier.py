@@ -35,7 +35,7 @@ from mitld_lp.automata.sta import STA
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.product import Absorbing
 from mitld_lp.sensing import compiled
-from mitld_lp.sensing.chunks import CHUNK, chunk_end
+from mitld_lp.sensing.chunks import CHUNK, RowGauge, chunk_end
 from mitld_lp.sensing.growth import ALARM_PAST, Growth
 from mitld_lp.sensing.info import (
     BYTES_PER_HYPOTHESIS,
@@ -96,7 +96,7 @@ class FrontierBuilder(StepRules):
                                             size=size, sensors=sensors,
                                             points=sta.truncation_points, name=name,
                                             alarm_past=ALARM_PAST if self.alarms else 0)
-        self.keys = Keys(6)  # the information states' keys (match)
+        self.keys, self.gauge = Keys(6), RowGauge()  # the states' keys (match)
         self.nq = dta.n_states
         self.unsensed_order = tuple(sorted(self.unsensed))
         nu, ns = len(self.unsensed_order), len(sensed)
@@ -319,6 +319,7 @@ class FrontierBuilder(StepRules):
         if rows is None:
             rows = self.hypothesis_rows(cols, c_state, c_act, c, occ, pu, o_seq, trunc)
         more, ended, (c, occ, w2, new, tid2, q2, mass, s_seq), *done = rows
+        self.gauge.made(int(hcount.sum()), len(c) + len(ended[0]))
         ends += more
         # the undecided hypotheses grouped by what the robot observes, their times
         # canonical (merge.py), each group's in InfoState order
@@ -508,7 +509,7 @@ class FrontierBuilder(StepRules):
 
     def chunk_end(self, head: int, end: int) -> int:
         """The end of the chunk from ``head``, at most ``end`` (:func:`chunk_end`)."""
-        return chunk_end(self.cols.data[5, head:end], head)
+        return chunk_end(self.cols.data[5, head:end], head, self.gauge.limit())
 
     # ---------------------------------------------------------------- the MDP
 
