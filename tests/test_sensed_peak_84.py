@@ -184,3 +184,27 @@ def test_compiled_single_levels_hold_no_per_entry_choices(sense: Sense) -> None:
     local_bytes = 4 * wide.cols.size
     assert local_bytes > 8192  # large enough for the bound below to see it
     assert held <= need + 4096, (held, need)
+
+
+def test_issue45_build_bounds_its_largest_chunk_by_rows(monkeypatch) -> None:
+    """On issue 45's sensed case the kernel's row pages hold the largest chunk's rows
+    (docs/results.md, ``sensed-84``): without the rows' bound one chunk made 207,978
+    rows; with it the largest makes at most 1.5 x :data:`chunks.CHUNK_ROWS` (189,008
+    measured: the gauge reads the last chunk's rate, which errs low)."""
+    from test_sensed_solve_memory import _issue45
+
+    made: list[int] = []
+    inner = chunks.RowGauge.made
+
+    def counted(self, hypotheses: int, rows: int) -> None:
+        made.append(rows)
+        inner(self, hypotheses, rows)
+
+    monkeypatch.setattr(chunks.RowGauge, "made", counted)
+    belief = _build(_issue45())
+    assert belief.mdp.n_transitions > 10**6
+    assert max(made) <= 1.5 * chunks.CHUNK_ROWS, max(made)
+    made.clear()
+    monkeypatch.setattr(chunks, "CHUNK_ROWS", 10**12)  # the base's chunks
+    _build(_issue45())
+    assert max(made) > 1.5 * 131_072  # the bound is what keeps the rows down
