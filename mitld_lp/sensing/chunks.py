@@ -21,10 +21,10 @@ CHUNK_ROWS = 131_072
 """The most rows (decided and undecided, some twenty numbers each, in the compiled
 kernel's pages, which the build keeps from level to level) a chunk is foreseen to make,
 at the rate of rows a hypothesis of the last chunk (:class:`RowGauge`).  Issue 45's
-sensed case made up to 214,000 rows in a chunk of 8,192 hypotheses: those pages and
+sensed case made up to 207,978 rows in a chunk of 8,192 hypotheses: those pages and
 the level's arrays made of them were the build's peak; the few chunks past this bound
 are cut smaller, the others are as they were (the product is the same whatever the
-chunks: tests/test_sensed_mem_chunks.py)."""
+chunks: tests/test_sensed_mem_chunks.py, tests/test_sensed_peak_84.py)."""
 
 
 class RowGauge:

@@ -252,7 +252,7 @@ class FrontierBuilder(StepRules):
         end = self.n_hyps + len(codes)
         if end > len(self.hyp_code):  # by doubling; the tail never written (no page
             # of it touched: np.resize filled it, 7.8 bytes a transition resident on
-            # issue 45's sensed case where 3.6 of them held no hypothesis)
+            # issue 45's sensed case where 3.3 of them held no hypothesis)
             size = max(end, 2 * len(self.hyp_code))
             self.hyp_code = grown(self.hyp_code, self.n_hyps, size)
             self.hyp_weight = grown(self.hyp_weight, self.n_hyps, size)
