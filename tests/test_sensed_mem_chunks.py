@@ -63,6 +63,7 @@ def test_chunk_end_bounds_the_hypotheses() -> None:
     its first state (one with more hypotheses than the bound alone)."""
     fb = frontier.FrontierBuilder.__new__(frontier.FrontierBuilder)
     fb.cols = frontier.Columns(6)
+    fb.gauge = chunks.RowGauge()  # no chunk made yet: the hypotheses alone bound it
     counts = np.array([3, 4, 2, 9, 1, 1], np.int64)
     fb.cols.extend(tuple(np.zeros(6, np.int64) for _ in range(5)) + (counts,))
     bound = chunks.CHUNK_HYPOTHESES

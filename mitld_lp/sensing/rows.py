@@ -18,7 +18,7 @@ import numpy as np
 __all__ = ["groups", "lex_order", "ordered_groups", "spread", "fsum_by", "mix64",
            "pack_words", "Table", "Lookup", "INT", "DENSE", "COMPILED_MIN_STATES",
            "COMPILED_MIN_ESTIMATE", "load_kernels", "running_kernels", "compiled_on",
-           "scatter", "small_pages", "narrow", "join_parts", "merged_entries",
+           "scatter", "small_pages", "narrow", "join_parts", "grown", "merged_entries",
            "MERGE_ENTRIES"]
 
 INT = np.int64
@@ -122,6 +122,15 @@ def join_parts(parts: list[list[Any]], k: int, dtype: Any) -> np.ndarray:
         out[at:at + len(p[k])] = p[k]
         at += len(p[k])
         p[k] = None
+    return out
+
+
+def grown(x: np.ndarray, used: int, size: int) -> np.ndarray:
+    """``x``'s first ``used`` values in a new array of ``size`` (at least ``used``) of
+    its dtype, the rest never written: where NumPy maps a large array, the system gives
+    the tail's pages only when first written (``np.resize`` writes them all)."""
+    out = np.empty(size, x.dtype)
+    out[:used] = x[:used]
     return out
 
 

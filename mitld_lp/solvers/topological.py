@@ -179,7 +179,7 @@ class SingleLevels:
     here, so a level costs a few NumPy calls on its slice.  ``skip``: states left out
     (they keep what they have)."""
 
-    __slots__ = ("states", "choices", "local", "cols", "vals", "leave", "level_state",
+    __slots__ = ("states", "choices", "_local", "cols", "vals", "leave", "level_state",
                  "state_choice", "choice_entry", "sense", "kernels", "positive", "runs",
                  "run_at", "first_choice", "owner_at", "ptr")
 
@@ -212,12 +212,14 @@ class SingleLevels:
         # the self-loops left out (divided out), read in batches, ``local`` int32 where
         # the choices' count allows; no per-choice owner is kept (the flow's walk makes
         # a group's own, :func:`~mitld_lp.solvers.level_batches.flow`)
-        self.local, self.cols, self.vals = off_diagonal_entries(
+        self._local, self.cols, self.vals = off_diagonal_entries(
             q.matrix, self.choices, np.repeat(self.states, counts))
         # each choice's first entry: its kept entries counted (``local`` is sorted)
         self.choice_entry = np.zeros(self.choices.size + 1, dtype=np.int64)
-        np.cumsum(np.bincount(self.local, minlength=self.choices.size),
+        np.cumsum(np.bincount(self._local, minlength=self.choices.size),
                   out=self.choice_entry[1:])
+        if wide:  # the compiled walks read the pointers: ``local`` made when asked
+            self._local = None  # (2.1 bytes a transition on issue 45's sensed case)
         # the choices' entry pointers in the columns' index type: a level's sums (and
         # the flow's scatter) are then one call of SciPy's compiled CSR (CSC) product
         # on the walk's arrays as they are (:mod:`~mitld_lp.solvers.level_batches`)
@@ -252,6 +254,16 @@ class SingleLevels:
         # per choice its state counted from its level's first state
         self.owner_at = np.repeat((np.arange(self.states.size, dtype=small)
                                    - np.repeat(a, z - a).astype(small)), counts)
+
+    @property
+    def local(self) -> np.ndarray:
+        """Per kept entry, its choice (a position in :attr:`choices`), in the entries'
+        order; the compiled walks keep none and it is counted out of
+        :attr:`choice_entry` when asked (the same array)."""
+        if self._local is not None:
+            return self._local
+        n = self.choices.size
+        return np.repeat(np.arange(n, dtype=index_dtype(n)), np.diff(self.choice_entry))
 
     def solve(self, first: int, stop: int, rewards: np.ndarray,
               bounds: np.ndarray) -> None:
