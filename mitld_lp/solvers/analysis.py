@@ -285,11 +285,10 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         attracted = _prob0e(m, mdp.row_groups, goal, wide, extra.any())
     # the product's components and reach; its levels only where the walk gives them
     # free (compiled): else the quotient's own are found below
-    # (a minimum's: one compiled pass where warm, its Prob1A search in it, analysis_reach;
-    # a maximum's SciPy walk was no slower: QVBS zeroconf 1000-4, 0.139 against 0.154 s)
+    # (one compiled pass where warm, a minimum's Prob1A search in it: analysis_reach)
     seeds = np.column_stack([goal] if same else [goal, wide])
-    fused = fused_components_reaching(m, mdp.row_groups, seeds, attracted[0][j0]) \
-        if minimum and without_one else None
+    fused = fused_components_reaching(m, mdp.row_groups, seeds,
+                                      attracted[0][j0] if minimum and without_one else None)
     found, reach, back = components_reaching(m, mdp.row_groups, seeds) if fused is None \
         else fused
     del seeds, fused

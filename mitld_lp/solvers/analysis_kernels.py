@@ -10,9 +10,10 @@ the columns of its choices' rows, each once) by Tarjan's algorithm with an expli
 stack, the roots in increasing order and each state's successors from the largest
 down: the order of SciPy's ``csgraph.connected_components(connection='strong')`` on the
 sorted graph :func:`~mitld_lp.solvers.graph.graph_view` builds, so the components are
-numbered as SciPy numbers them (in the order they are completed).  A state's sorted,
-distinct successors are written when the search first enters it (no graph built
-before).  Which seed sets a component reaches is found as it is completed, every
+numbered as SciPy numbers them (in the order they are completed).  That sorted graph
+is built in the same call, a state at a time (no SciPy matrix, no duplicate merge of
+the whole pattern), and returned for the condensation a caller may walk later.  Which
+seed sets a component reaches is found as it is completed, every
 component it reaches being complete then: a bit a seed set, OR-ed from the members'
 seeds and from each edge into a completed component, as the edge is crossed (no second
 pass over the entries).  Imported only where the compiled walks are (the kernel loader's
@@ -34,26 +35,45 @@ MAX_SEEDS = 8
 
 @numba.njit(cache=True, nogil=True)
 def components_reach(indptr, indices, row_groups, bits):  # pragma: no cover - compiled
-    """``(n_components, label, reach, n_edges)`` of the state graph of the choice matrix
+    """``(n_components, label, reach, ptr, succ)`` of the state graph of the choice matrix
     ``indptr, indices`` (state ``s``'s choices are rows ``row_groups[s]:row_groups[s+1]``;
     its states and entries below 2**31 - 1): ``label`` (int32) each state's component,
     numbered as completed (module docs); ``reach`` (uint8) each state's bits: bit ``j``
     set iff it reaches a state whose ``bits`` has bit ``j`` set (itself included);
-    ``n_edges`` the state graph's edges (distinct successors).  Pearce's one-array form
+    ``ptr, succ`` the state graph (int32 CSR, each row sorted, without repeats: SciPy's
+    route's, :func:`~mitld_lp.solvers.graph.graph_view`), built first, a state at a time
+    in order (the rows read in stored order: 0.03 s against 0.035 entering each state's
+    as the search reaches it, on QVBS csma 4-2).  Pearce's one-array form
     of Tarjan's search (as SciPy's): ``rindex`` holds a state's index, then its low
     link, then, completed, ``n - 1 -`` its component, so an edge reads one number of
     its head."""
     n = row_groups.shape[0] - 1
+    ptr = np.empty(n + 1, dtype=np.int32)
     succ = np.empty(indptr[row_groups[n]] - indptr[row_groups[0]], dtype=np.int32)
+    pos = 0
+    ptr[0] = 0
+    for v in range(n):  # each state's distinct successors, sorted
+        start = pos
+        for e in range(indptr[row_groups[v]], indptr[row_groups[v + 1]]):
+            x = indices[e]
+            i = pos
+            while i > start and succ[i - 1] > x:  # insertion, a short run
+                succ[i] = succ[i - 1]
+                i -= 1
+            if i > start and succ[i - 1] == x:  # a repeat: undo the shift
+                for r in range(i, pos):
+                    succ[r] = succ[r + 1]
+                continue
+            succ[i] = x
+            pos += 1
+        ptr[v + 1] = pos
     rindex = np.zeros(n, dtype=np.int32)  # 0: not entered
     acc = bits.copy()  # a state's own bits, and those of the components its edges enter
     comp_bits = np.zeros(n, dtype=np.uint8)
     stack = np.empty(n, dtype=np.int32)  # entered states whose root is not finished
     work_v = np.empty(n, dtype=np.int32)
     work_at = np.empty(n, dtype=np.int32)  # the next successor's position, descending
-    work_lo = np.empty(n, dtype=np.int32)
     work_root = np.empty(n, dtype=np.bool_)
-    pos = 0
     top = 0
     index = 1
     c = n - 1  # the next completed component's rindex (its label n - 1 - c)
@@ -64,30 +84,16 @@ def components_reach(indptr, indices, row_groups, bits):  # pragma: no cover - c
         depth = 0
         entering = True
         while True:
-            if entering:  # v entered: its distinct successors written, sorted
+            if entering:
                 rindex[v] = index
                 index += 1
-                start = pos
-                for e in range(indptr[row_groups[v]], indptr[row_groups[v + 1]]):
-                    x = indices[e]
-                    i = pos
-                    while i > start and succ[i - 1] > x:  # insertion, a short run
-                        succ[i] = succ[i - 1]
-                        i -= 1
-                    if i > start and succ[i - 1] == x:  # a repeat: undo the shift
-                        for r in range(i, pos):
-                            succ[r] = succ[r + 1]
-                        continue
-                    succ[i] = x
-                    pos += 1
                 work_v[depth] = v
-                work_at[depth] = pos - 1
-                work_lo[depth] = start
+                work_at[depth] = ptr[v + 1] - 1
                 work_root[depth] = True
                 depth += 1
             v = work_v[depth - 1]
             at = work_at[depth - 1]
-            lo = work_lo[depth - 1]
+            lo = ptr[v]
             rv = rindex[v]
             is_root = work_root[depth - 1]
             entering = False
@@ -140,7 +146,7 @@ def components_reach(indptr, indices, row_groups, bits):  # pragma: no cover - c
     for s in range(n):
         label[s] = n - 1 - rindex[s]
         reach[s] = comp_bits[label[s]]
-    return n_comp, label, reach, pos
+    return n_comp, label, reach, ptr, succ[:pos]
 
 
 def reach_bits(seeds: np.ndarray) -> np.ndarray:

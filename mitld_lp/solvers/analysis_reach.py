@@ -65,9 +65,9 @@ def fused_components_reaching(matrix: sp.csr_array, row_groups: np.ndarray, seed
     if groups.flags.writeable:  # one signature: the product's row groups are read-only
         groups = groups.view()
         groups.flags.writeable = False
-    n_comp, label, bits, n_edges = kernels.components_reach(
+    n_comp, label, bits, ptr, succ = kernels.components_reach(
         matrix.indptr, matrix.indices, groups, kernels.reach_bits(columns))
-    size = n + int(n_edges)
+    size = n + int(succ.size)
     if size <= SMALL:  # walked in plain Python by SciPy's route: its numbering
         return None
     reach = np.empty((n, k), dtype=bool)
@@ -76,13 +76,19 @@ def fused_components_reaching(matrix: sp.csr_array, row_groups: np.ndarray, seed
     reached = None if extra is None else ((bits >> np.uint8(k)) & np.uint8(1)).astype(bool)
     del bits
     n_comp = int(n_comp)
-    # SciPy's route keeps int64 labels where it condenses (few components), else its int32
-    comp = label.astype(np.int64) if 2 * n_comp < n else label.astype(index_dtype(n),
-                                                                      copy=False)
+    # SciPy's route keeps int64 labels where it condenses (few components: the levels are
+    # walked, so the state graph is kept for them here), else its int32 and no graph
+    few = 2 * n_comp < n
+    comp = label.astype(np.int64) if few else label.astype(index_dtype(n), copy=False)
+    held = [(ptr, succ)] if few else []
+    del ptr, succ
 
     def later() -> np.ndarray:  # the walk levels() makes, on the same components
-        _, c, out_degree, preds_of = condensation(graph_view(matrix, row_groups), n_comp,
-                                                  comp)
+        graph = sp.csr_array((np.ones(held[0][1].size, dtype=bool), held[0][1], held[0][0]),
+                             shape=(n, n)) if held else graph_view(matrix, row_groups)
+        held.clear()
+        _, c, out_degree, preds_of = condensation(graph, n_comp, comp)
+        del graph
         return leveled(size, n_comp, c, out_degree, preds_of, None).level
 
     return Levels(comp, None, None, later), reach, reached  # type: ignore[arg-type]
