@@ -23,7 +23,7 @@ from scipy.optimize import linprog
 from scipy.sparse.csgraph import connected_components
 
 from mitld_lp.mdp import MDP
-from mitld_lp.solvers import analysis, analysis_kernels, analysis_reach
+from mitld_lp.solvers import analysis, analysis_gates, analysis_kernels, analysis_reach
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.iteration import interval_iteration
 
@@ -210,7 +210,7 @@ def test_fused_solve_brackets_scipys_lp(monkeypatch, seed: int) -> None:
     rng = np.random.default_rng(8484 + seed)
     mdp, goal, _ = _product(rng, 150)
     monkeypatch.setattr(analysis_reach, "SMALL", 0)  # the route taken on a small product
-    monkeypatch.setattr(analysis_reach, "PAID_MIN_ENTRIES", 0)
+    monkeypatch.setattr(analysis_gates, "PAID_MIN_ENTRIES", 0)
     taken: list[bool] = []
     _fused_forced(monkeypatch, taken)
     q = analysis.analyse(mdp, goal, sense=Sense.MIN)[0]

@@ -250,16 +250,17 @@ def test_the_quotients_levels_were_compiled_in_some_case_above() -> None:
 def expected(entries: int, paid: bool, warm: bool, levels: bool) -> bool:
     """The rule: compiled from 4 million entries, from 150,000 once a kernel's load is
     paid; where the kernel is warm in the loader's cache, an attractor from 100,000
-    entries, and an attractor or the quotient's levels from 20,000 once a load is paid."""
+    entries, an attractor from 20,000 once a load is paid and the quotient's levels from
+    1,000."""
     if entries >= 4_000_000 or (paid and entries >= 150_000):
         return True
-    if not warm or entries < 20_000:
+    if not warm or entries < (1_000 if levels else 20_000):
         return False
     return paid or (not levels and entries >= 100_000)
 
 
-@pytest.mark.parametrize("entries", [0, 19_999, 20_000, 99_999, 100_000, 149_999, 150_000,
-                                     3_999_999, 4_000_000])
+@pytest.mark.parametrize("entries", [0, 999, 1_000, 19_999, 20_000, 99_999, 100_000,
+                                     149_999, 150_000, 3_999_999, 4_000_000])
 @pytest.mark.parametrize("paid", [True, False])
 @pytest.mark.parametrize("warm", [True, False])
 @pytest.mark.parametrize("levels", [True, False])

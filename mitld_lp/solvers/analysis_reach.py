@@ -10,7 +10,9 @@ minimum's ``Prob1A`` search (the states reaching its prob-0 states,
 
 Taken only where the kernel's load is paid and its cache file is there
 (:func:`~mitld_lp.solvers.analysis_gates.warm`: a solve never compiles it), on an int32
-pattern that :func:`~mitld_lp.solvers.compiled_graph.fits` in int32 and whose state graph
+pattern that :func:`~mitld_lp.solvers.compiled_graph.fits` in int32, of at least
+:data:`~mitld_lp.solvers.analysis_gates.PAID_MIN_ENTRIES` entries (read there, so that
+a caller turning the compiled walks off turns this one off too), and whose state graph
 is past :data:`~mitld_lp.util.traversal.SMALL`; else None, and the caller takes SciPy's."""
 
 from __future__ import annotations
@@ -20,7 +22,8 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.solvers.analysis_gates import PAID_MIN_ENTRIES, component_walks, warm
+from mitld_lp.solvers import analysis_gates
+from mitld_lp.solvers.analysis_gates import component_walks, warm
 from mitld_lp.solvers.graph import Levels, condensation, graph_view, leveled
 from mitld_lp.util import kernel_loader
 from mitld_lp.util.arrays import index_dtype
@@ -51,7 +54,7 @@ def fused_components_reaching(matrix: sp.csr_array, row_groups: np.ndarray, seed
     reaching an ``extra`` state (None without it); None where its route is not taken
     (module docs)."""
     n = row_groups.shape[0] - 1
-    if (matrix.nnz < PAID_MIN_ENTRIES or n + matrix.nnz <= SMALL
+    if (matrix.nnz < analysis_gates.PAID_MIN_ENTRIES or n + matrix.nnz <= SMALL
             or matrix.indices.dtype != np.int32
             or matrix.indptr.dtype != np.int32 or max(n, matrix.nnz) >= 2**31 - 1
             or component_walks(matrix.nnz, n) is not None):
