@@ -87,6 +87,21 @@ def test_labels_are_scipys_and_reach_is_a_bfs(seed: int, index: type) -> None:
         assert got.tolist() == _reaching(succ, seeds[:, j]).tolist()
 
 
+def test_the_last_state_entered_is_not_taken_for_a_completed_one() -> None:
+    """0 -> 0 completes first (a seed); then 1 -> 2 -> 2 enters every state left, so the
+    self-loop's head holds the largest index there is: still on the stack, not a
+    completed component (whose bits it would take: 2 reaches no seed)."""
+    indptr = np.array([0, 1, 2, 3], dtype=np.int32)
+    indices = np.array([0, 2, 2], dtype=np.int32)
+    groups = np.array([0, 1, 2, 3], dtype=np.int64)
+    seeds = np.array([[True], [False], [False]])
+    for kernel in (KERNEL, analysis_kernels.components_reach):
+        n_comp, label, bits, _, _ = kernel(indptr, indices, groups,
+                                           analysis_kernels.reach_bits(seeds))
+        assert int(n_comp) == 3 and label.tolist() == [0, 2, 1]
+        assert bits.tolist() == [1, 0, 0]
+
+
 def test_compiled_kernel_matches_its_code_on_the_warm_signature() -> None:
     rng = np.random.default_rng(84)
     indptr, indices, groups = _random_pattern(rng, 500, np.int32)

@@ -59,7 +59,7 @@ def gate(monkeypatch: pytest.MonkeyPatch):
 
     def use(on: bool) -> list[str]:
         calls.clear()
-        for name in ("WARM_MIN_ENTRIES", "PAID_MIN_ENTRIES"):
+        for name in ("WARM_MIN_ENTRIES", "PAID_MIN_ENTRIES", "LEVELS_MIN_ENTRIES"):
             monkeypatch.setattr(analysis_gates, name, 0 if on else sys.maxsize)
         monkeypatch.setattr(analysis_gates, "_WARM", {analysis_gates.ATTRACTOR: on,
                                                       analysis_gates.LEVELS: on})
@@ -235,6 +235,7 @@ def test_the_quotients_levels_were_compiled_in_some_case_above() -> None:
                     mp.setattr(walks_module, "COMPILED_MIN_ENTRIES", sys.maxsize)
                     mp.setattr(walks_module, "COMPILED_LOADED_MIN_ENTRIES", sys.maxsize)
                     mp.setattr(analysis_gates, "PAID_MIN_ENTRIES", 0)
+                    mp.setattr(analysis_gates, "LEVELS_MIN_ENTRIES", 0)
                     mp.setattr(analysis_gates, "WARM_MIN_ENTRIES", 0)
                     mp.setattr(analysis_gates, "_WARM", {analysis_gates.ATTRACTOR: True,
                                                          analysis_gates.LEVELS: True})
@@ -423,7 +424,7 @@ def test_the_quotients_are_the_same_with_the_components_on_scipy_or_compiled(
                               ("numpy", sys.maxsize, sys.maxsize)):
         monkeypatch.setattr(walks_module, "COMPILED_MIN_ENTRIES", low)
         monkeypatch.setattr(walks_module, "COMPILED_LOADED_MIN_ENTRIES", loaded)
-        for name in ("WARM_MIN_ENTRIES", "PAID_MIN_ENTRIES"):
+        for name in ("WARM_MIN_ENTRIES", "PAID_MIN_ENTRIES", "LEVELS_MIN_ENTRIES"):
             monkeypatch.setattr(analysis_gates, name, loaded)
         calls.clear()
         qs = analyse(mdp, goal, extra, sense=sense)

@@ -45,7 +45,7 @@ def components_reach(indptr, indices, row_groups, bits):  # pragma: no cover - c
     in order (the rows read in stored order: 0.03 s against 0.035 entering each state's
     as the search reaches it, on QVBS csma 4-2).  Pearce's one-array form
     of Tarjan's search (as SciPy's): ``rindex`` holds a state's index, then its low
-    link, then, completed, ``n - 1 -`` its component, so an edge reads one number of
+    link, then, completed, ``n -`` its component, so an edge reads one number of
     its head."""
     n = row_groups.shape[0] - 1
     ptr = np.empty(n + 1, dtype=np.int32)
@@ -76,7 +76,9 @@ def components_reach(indptr, indices, row_groups, bits):  # pragma: no cover - c
     work_root = np.empty(n, dtype=np.bool_)
     top = 0
     index = 1
-    c = n - 1  # the next completed component's rindex (its label n - 1 - c)
+    # the next completed component's rindex (its label n - c): above every entered
+    # state's index (at most the states entered and not completed, n - n_components)
+    c = n
     for root in range(n):
         if rindex[root]:
             continue
@@ -105,7 +107,7 @@ def components_reach(indptr, indices, row_groups, bits):  # pragma: no cover - c
                     entering = True
                     break
                 if rw > c:  # a completed component: its bits are final
-                    acc[v] |= comp_bits[n - 1 - rw]
+                    acc[v] |= comp_bits[n - rw]
                 elif rw < rv:  # on the stack: in v's component, below v's root
                     rv = rw
                     is_root = False
@@ -126,7 +128,7 @@ def components_reach(indptr, indices, row_groups, bits):  # pragma: no cover - c
                     index -= 1
                     b |= acc[w]
                 rindex[v] = c
-                comp_bits[n - 1 - c] = b
+                comp_bits[n - c] = b
                 c -= 1
             else:
                 stack[top] = v
@@ -136,15 +138,15 @@ def components_reach(indptr, indices, row_groups, bits):  # pragma: no cover - c
             u = work_v[depth - 1]
             rv = rindex[v]
             if rv > c:  # v's component completed below u
-                acc[u] |= comp_bits[n - 1 - rv]
+                acc[u] |= comp_bits[n - rv]
             elif rv < rindex[u]:
                 rindex[u] = rv
                 work_root[depth - 1] = False
-    n_comp = n - 1 - c
+    n_comp = n - c
     label = np.empty(n, dtype=np.int32)
     reach = np.empty(n, dtype=np.uint8)
     for s in range(n):
-        label[s] = n - 1 - rindex[s]
+        label[s] = n - rindex[s]
         reach[s] = comp_bits[label[s]]
     return n_comp, label, reach, ptr, succ[:pos]
 
