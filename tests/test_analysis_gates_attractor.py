@@ -59,7 +59,7 @@ def gate(monkeypatch: pytest.MonkeyPatch):
 
     def use(on: bool) -> list[str]:
         calls.clear()
-        for name in ("WARM_MIN_ENTRIES", "PAID_MIN_ENTRIES"):
+        for name in ("WARM_MIN_ENTRIES", "PAID_MIN_ENTRIES", "LEVELS_MIN_ENTRIES"):
             monkeypatch.setattr(analysis_gates, name, 0 if on else sys.maxsize)
         monkeypatch.setattr(analysis_gates, "_WARM", {analysis_gates.ATTRACTOR: on,
                                                       analysis_gates.LEVELS: on})
@@ -235,6 +235,7 @@ def test_the_quotients_levels_were_compiled_in_some_case_above() -> None:
                     mp.setattr(walks_module, "COMPILED_MIN_ENTRIES", sys.maxsize)
                     mp.setattr(walks_module, "COMPILED_LOADED_MIN_ENTRIES", sys.maxsize)
                     mp.setattr(analysis_gates, "PAID_MIN_ENTRIES", 0)
+                    mp.setattr(analysis_gates, "LEVELS_MIN_ENTRIES", 0)
                     mp.setattr(analysis_gates, "WARM_MIN_ENTRIES", 0)
                     mp.setattr(analysis_gates, "_WARM", {analysis_gates.ATTRACTOR: True,
                                                          analysis_gates.LEVELS: True})
@@ -250,16 +251,17 @@ def test_the_quotients_levels_were_compiled_in_some_case_above() -> None:
 def expected(entries: int, paid: bool, warm: bool, levels: bool) -> bool:
     """The rule: compiled from 4 million entries, from 150,000 once a kernel's load is
     paid; where the kernel is warm in the loader's cache, an attractor from 100,000
-    entries, and an attractor or the quotient's levels from 20,000 once a load is paid."""
+    entries, an attractor from 20,000 once a load is paid and the quotient's levels from
+    1,000."""
     if entries >= 4_000_000 or (paid and entries >= 150_000):
         return True
-    if not warm or entries < 20_000:
+    if not warm or entries < (1_000 if levels else 20_000):
         return False
     return paid or (not levels and entries >= 100_000)
 
 
-@pytest.mark.parametrize("entries", [0, 19_999, 20_000, 99_999, 100_000, 149_999, 150_000,
-                                     3_999_999, 4_000_000])
+@pytest.mark.parametrize("entries", [0, 999, 1_000, 19_999, 20_000, 99_999, 100_000,
+                                     149_999, 150_000, 3_999_999, 4_000_000])
 @pytest.mark.parametrize("paid", [True, False])
 @pytest.mark.parametrize("warm", [True, False])
 @pytest.mark.parametrize("levels", [True, False])
@@ -422,7 +424,7 @@ def test_the_quotients_are_the_same_with_the_components_on_scipy_or_compiled(
                               ("numpy", sys.maxsize, sys.maxsize)):
         monkeypatch.setattr(walks_module, "COMPILED_MIN_ENTRIES", low)
         monkeypatch.setattr(walks_module, "COMPILED_LOADED_MIN_ENTRIES", loaded)
-        for name in ("WARM_MIN_ENTRIES", "PAID_MIN_ENTRIES"):
+        for name in ("WARM_MIN_ENTRIES", "PAID_MIN_ENTRIES", "LEVELS_MIN_ENTRIES"):
             monkeypatch.setattr(analysis_gates, name, loaded)
         calls.clear()
         qs = analyse(mdp, goal, extra, sense=sense)

@@ -103,6 +103,7 @@ def numpy_walks(monkeypatch: pytest.MonkeyPatch) -> None:
     # the attractor's and the quotient levels' own gates (a warm cache), off too
     monkeypatch.setattr(analysis_gates, "WARM_MIN_ENTRIES", 1 << 40)
     monkeypatch.setattr(analysis_gates, "PAID_MIN_ENTRIES", 1 << 40)
+    monkeypatch.setattr(analysis_gates, "LEVELS_MIN_ENTRIES", 1 << 40)
 
 
 @pytest.mark.usefixtures("numpy_walks")

@@ -14,7 +14,7 @@ import pytest
 import scipy.sparse as sp
 from conftest import build_mdp
 
-from mitld_lp.solvers import graph, level_search
+from mitld_lp.solvers import analysis_gates, graph, level_search
 from mitld_lp.solvers.analysis import analyse
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.topological import SingleLevels
@@ -316,6 +316,8 @@ def walked_and_searched(tmp_path: Path, monkeypatch, program: str, reached: str,
     for searched in (False, True):
         if searched:  # every graph large and thin: the levels searched
             monkeypatch.setattr(graph, "SMALL", 0)
+            # by NumPy's walk, not the compiled one a paid load takes from 1,000 entries
+            monkeypatch.setattr(analysis_gates, "LEVELS_MIN_ENTRIES", sys.maxsize)
             monkeypatch.setattr(graph, "PROBE_LEVELS", 1)
             monkeypatch.setattr(level_search, "LEVEL_CALL_SECONDS", 1.0)
         r = synthesize(load_model(model))

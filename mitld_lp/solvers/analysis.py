@@ -83,6 +83,7 @@ from mitld_lp.mdp import MDP, as_state_mask
 from mitld_lp.solvers.analysis_ends import end_components, ends_and_sure, may_cycle
 from mitld_lp.solvers.analysis_gates import attractor_walks, pay_if_warm
 from mitld_lp.solvers.analysis_patterns import compact, largest_inside
+from mitld_lp.solvers.analysis_reach import fused_components_reaching
 from mitld_lp.solvers.analysis_singles import (
     prob1e_on_product,
     prob1e_single_states,
@@ -276,6 +277,7 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # were alive together at the analysis's peak, then the reversal beside the sweeps'
     # gate and the components' checks)
     minimum = sense is Sense.MIN
+    j0 = 1 if same else 0
     # the load the certificate of this product pays, paid first where its kernels are
     # warm: the walks below run compiled (analysis_gates)
     pay_if_warm(int(m.nnz))
@@ -283,11 +285,15 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         attracted = _prob0e(m, mdp.row_groups, goal, wide, extra.any())
     # the product's components and reach; its levels only where the walk gives them
     # free (compiled): else the quotient's own are found below
-    found, reach, back = components_reaching(
-        m, mdp.row_groups, np.column_stack([goal] if same else [goal, wide]))
+    # (one compiled pass where warm, a minimum's Prob1A search in it: analysis_reach)
+    seeds = np.column_stack([goal] if same else [goal, wide])
+    fused = fused_components_reaching(m, mdp.row_groups, seeds,
+                                      attracted[0][j0] if minimum and without_one else None)
+    found, reach, back = components_reaching(m, mdp.row_groups, seeds) if fused is None \
+        else fused
+    del seeds, fused
     reach = reach[:, [0, 0] if same else [0, 1]]
     n = mdp.n_states
-    j0 = 1 if same else 0
     sure_state = np.zeros(n, dtype=bool)
     early = None  # a maximum's value-1 states found with its end components
     if minimum:

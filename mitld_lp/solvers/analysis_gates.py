@@ -16,7 +16,7 @@ and two of the analysis's walks pay it back on a mid-sized product:
   attractor` over 75,780 entries: 0.020 s on NumPy);
 * the **quotient's own levels** (:func:`level_walks`,
   :func:`~mitld_lp.solvers.quotient_order.quotient_blocks`): compiled from
-  :data:`PAID_MIN_ENTRIES` once a load is paid and the kernel is warm, in place of SciPy's
+  :data:`LEVELS_MIN_ENTRIES` once a load is paid and the kernel is warm, in place of SciPy's
   components and Dijkstra's search of thin levels.
 
 The product's components and reach (:func:`component_walks`,
@@ -56,7 +56,8 @@ from mitld_lp.solvers import walks as _walks
 from mitld_lp.solvers.walks import compiled_walks, load_walks
 from mitld_lp.util import kernel_loader
 
-__all__ = ["ANALYSIS_KERNELS", "ATTRACTOR", "DENSE_ENTRIES", "LEVELS", "PAID_MIN_ENTRIES",
+__all__ = ["ANALYSIS_KERNELS", "ATTRACTOR", "DENSE_ENTRIES", "LEVELS", "LEVELS_MIN_ENTRIES",
+           "PAID_MIN_ENTRIES",
            "WARM_MIN_ENTRIES", "attractor_walks", "component_walks", "level_walks",
            "pay_if_warm", "warm"]
 
@@ -70,6 +71,12 @@ PAID_MIN_ENTRIES = 20_000
 """Stored entries from which an attractor or the quotient's levels run compiled on a
 warm cache once a kernel's load is paid (only the kernel's link is left, 1-3 ms once a
 process): below, the plain walks' 4-5 ms (:data:`~mitld_lp.util.traversal.SMALL`)."""
+
+LEVELS_MIN_ENTRIES = 1_000
+"""Stored entries from which the quotient's levels run compiled on a warm cache once a
+load is paid: the plain walk of QVBS csma 4-2's quotient (678 states, 1,343 entries)
+took 3-5 ms of CPU in Python's Tarjan, the compiled one a call's cost (the same
+components, numbered alike, and levels)."""
 
 DENSE_ENTRIES = 8
 """Entries a state from which the product's components run compiled once a load is paid
@@ -114,7 +121,7 @@ def level_walks(entries: int) -> Any:
     """The module of compiled walks for the quotient's components and levels on a matrix
     of ``entries`` stored entries, or None where SciPy's walk is used (module docs)."""
     walks = compiled_walks(entries)
-    if (walks is not None or entries < PAID_MIN_ENTRIES or not kernel_loader.compiled_paid()
+    if (walks is not None or entries < LEVELS_MIN_ENTRIES or not kernel_loader.compiled_paid()
             or not warm(LEVELS)):
         return walks
     return load_walks()

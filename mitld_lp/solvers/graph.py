@@ -312,10 +312,10 @@ def levels(graph: sp.csr_array, seeds: np.ndarray | None = None) -> Levels:
     if walks is not None and graph.has_canonical_format and walks.fits(graph.shape[0],
                                                                         graph.nnz):
         return _compiled_levels(walks, graph.indptr, graph.indices, seeds)
-    return _leveled(graph.shape[0] + graph.nnz, *_condensed(graph), seeds)
+    return leveled(graph.shape[0] + graph.nnz, *_condensed(graph), seeds)
 
 
-def _leveled(size: int, n_comp: int, comp: np.ndarray, out_degree: np.ndarray,
+def leveled(size: int, n_comp: int, comp: np.ndarray, out_degree: np.ndarray,
              preds_of: sp.csr_array, seeds: np.ndarray | None) -> Levels:
     """:func:`levels` of a graph of ``size`` nodes plus entries, condensed
     (:func:`_condensed`; ``out_degree`` is used up)."""
@@ -368,10 +368,10 @@ def _condensed(graph: sp.csr_array) -> tuple[int, np.ndarray, np.ndarray, sp.csr
     component's out-degree to the others (with multiplicity) and its predecessors
     (``preds_of``: row ``d`` lists the components with an edge to ``d``; its data the
     multiplicities)."""
-    return _condensation(graph, *strong_components(graph))
+    return condensation(graph, *strong_components(graph))
 
 
-def _condensation(graph: sp.csr_array, n_comp: int, comp: np.ndarray,
+def condensation(graph: sp.csr_array, n_comp: int, comp: np.ndarray,
                   ) -> tuple[int, np.ndarray, np.ndarray, sp.csr_array]:
     """:func:`_condensed` of ``graph`` whose components ``comp`` are known."""
     # the per-edge arrays in the graph's own index type (4 bytes an edge when it can)
@@ -416,7 +416,7 @@ def state_components(matrix: sp.csr_array, row_groups: np.ndarray,
     del graph
 
     def later() -> np.ndarray:  # the walk levels() makes, on the same condensation
-        return _leveled(size, n_comp, comp, out_degree, preds_of, None).level
+        return leveled(size, n_comp, comp, out_degree, preds_of, None).level
 
     return Levels(comp, None, reaching(preds_of, comp, seeds),  # type: ignore[arg-type]
                   later)
@@ -450,10 +450,10 @@ def components_reaching(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.
         shape=graph.shape, copy=False))
     n = graph.shape[0]
     if 2 * n_comp < n:  # few components: their condensation is the smaller graph
-        n_comp, comp, out_degree, preds_of = _condensation(graph, n_comp, label)
+        n_comp, comp, out_degree, preds_of = condensation(graph, n_comp, label)
         del graph
         found = Levels(comp, None, reaching(preds_of, comp, seeds),  # type: ignore[arg-type]
-                       lambda: _leveled(size, n_comp, comp, out_degree, preds_of, None).level)
+                       lambda: leveled(size, n_comp, comp, out_degree, preds_of, None).level)
         return found, found.reach[comp], None
     # reversed from the graph's rows (starts): no source an edge (csma 4-2: 9 MB)
     back = Reversed(n, None, graph.indices, starts=graph.indptr)
@@ -461,13 +461,13 @@ def components_reaching(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.
     reach = np.zeros((n, seeds.shape[1]), dtype=bool)
     for j in range(seeds.shape[1]):
         reach[:, j] = back.reaching(seeds[:, j])
-    comp = np.asarray(label, dtype=index_dtype(n))  # later()'s _condensation reads it
+    comp = np.asarray(label, dtype=index_dtype(n))  # later()'s condensation reads it
     del label  # SciPy's int32 labels kept as they are: no int64 copy (csma: 2.2 B/t)
 
     def later() -> np.ndarray:  # the walk levels() makes, on the same components
-        _, c, out_degree, preds_of = _condensation(graph_view(matrix, row_groups), n_comp,
+        _, c, out_degree, preds_of = condensation(graph_view(matrix, row_groups), n_comp,
                                                    comp)
-        return _leveled(size, n_comp, c, out_degree, preds_of, None).level
+        return leveled(size, n_comp, c, out_degree, preds_of, None).level
 
     return Levels(comp, None, None, later), reach, back  # type: ignore[arg-type]
 

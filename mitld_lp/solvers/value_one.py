@@ -39,7 +39,7 @@ __all__ = ["ATTRACTOR_STRATEGY", "SureStrategy", "attractor_strategy", "choices_
 
 
 def prob1a_first(m: sp.csr_array, row_groups: np.ndarray, maybe: np.ndarray,
-                 zero: np.ndarray, back: Reversed | None = None) -> np.ndarray:
+                 zero: np.ndarray, back: Reversed | np.ndarray | None = None) -> np.ndarray:
     """``(n,)`` bool: a minimum's ``maybe`` states of value 1 for the target whose
     prob-0 states are ``zero``: those with no path through ``maybe`` states to one.
     With ``back`` (the state graph reversed, :func:`~mitld_lp.solvers.graph.
@@ -47,10 +47,12 @@ def prob1a_first(m: sp.csr_array, row_groups: np.ndarray, maybe: np.ndarray,
     of their choices stays among them, as a product's absorbing targets do), no path
     to ``zero`` runs through them, so the plain backward search on ``back`` gives the
     same states, with no edge list gathered and reversed for it (QVBS csma 4-2: 0.015
-    -> 0.004 s of CPU)."""
+    -> 0.004 s of CPU).  ``back`` may be that search's answer already (``(n,)`` bool, the
+    states reaching ``zero``: :mod:`~mitld_lp.solvers.analysis_reach`'s pass)."""
     sure = np.zeros(maybe.size, dtype=bool)
     if back is not None and _closed(m, np.asarray(row_groups), ~maybe & ~zero):
-        sure[maybe] = ~back.reaching(zero)[maybe]
+        reached = back if isinstance(back, np.ndarray) else back.reaching(zero)
+        sure[maybe] = ~reached[maybe]
     else:
         sure[maybe] = ~reaching_through(m, row_groups, maybe, zero)[maybe]
     return sure

@@ -85,6 +85,11 @@ SIGNATURES: dict[str, dict[str, tuple[str, ...]]] = {
             "i8/1C i8/1C i8/1C i8/1C f8/1C i8/1C f8/1C",
         ),
     },
+    "mitld_lp.solvers.analysis_kernels": {
+        "components_reach": (
+            "i4/1C i4/1C i8/1C/ro u1/1C",
+        ),
+    },
     "mitld_lp.solvers.certify_kernels": {
         "bellman_rows": (
             "i8/1C i8/1C i8/1C i4/1C i4/1C f8/1C f8/1C i4/1C/ro f8/1C/ro f8/1C/ro b1/1C bool "

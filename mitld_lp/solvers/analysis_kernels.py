@@ -1,0 +1,173 @@
+r"""The product's components and reach in one compiled pass (numba), for
+:func:`~mitld_lp.solvers.graph.components_reaching`'s SciPy route: the same labels and
+the same reached states, without SciPy's state graph (its duplicates merged), its
+strong components and a search of the graph reversed for each seed set (three passes
+over the product's entries and a reversal of them: QVBS csma 4-2, 1.1 million entries,
+0.035 s of CPU).
+
+:func:`components_reach` walks the state graph of a choice matrix (a state's successors
+the columns of its choices' rows, each once) by Tarjan's algorithm with an explicit
+stack, the roots in increasing order and each state's successors from the largest
+down: the order of SciPy's ``csgraph.connected_components(connection='strong')`` on the
+sorted graph :func:`~mitld_lp.solvers.graph.graph_view` builds, so the components are
+numbered as SciPy numbers them (in the order they are completed).  That sorted graph
+is built in the same call, a state at a time (no SciPy matrix, no duplicate merge of
+the whole pattern), and returned for the condensation a caller may walk later.  Which
+seed sets a component reaches is found as it is completed, every
+component it reaches being complete then: a bit a seed set, OR-ed from the members'
+seeds and from each edge into a completed component, as the edge is crossed (no second
+pass over the entries).  Imported only where the compiled walks are (the kernel loader's
+cache, else numba)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mitld_lp.util import kernel_loader
+
+numba = kernel_loader.lazy_numba(globals())
+
+__all__ = ["MAX_SEEDS", "components_reach", "reach_bits", "warm_up"]
+
+MAX_SEEDS = 8
+"""The most seed sets one call reads (a bit each of a byte)."""
+
+
+@numba.njit(cache=True, nogil=True)
+def components_reach(indptr, indices, row_groups, bits):  # pragma: no cover - compiled
+    """``(n_components, label, reach, ptr, succ)`` of the state graph of the choice matrix
+    ``indptr, indices`` (state ``s``'s choices are rows ``row_groups[s]:row_groups[s+1]``;
+    its states and entries below 2**31 - 1): ``label`` (int32) each state's component,
+    numbered as completed (module docs); ``reach`` (uint8) each state's bits: bit ``j``
+    set iff it reaches a state whose ``bits`` has bit ``j`` set (itself included);
+    ``ptr, succ`` the state graph (int32 CSR, each row sorted, without repeats: SciPy's
+    route's, :func:`~mitld_lp.solvers.graph.graph_view`), built first, a state at a time
+    in order (the rows read in stored order: 0.03 s against 0.035 entering each state's
+    as the search reaches it, on QVBS csma 4-2).  Pearce's one-array form
+    of Tarjan's search (as SciPy's): ``rindex`` holds a state's index, then its low
+    link, then, completed, ``n -`` its component, so an edge reads one number of
+    its head."""
+    n = row_groups.shape[0] - 1
+    ptr = np.empty(n + 1, dtype=np.int32)
+    succ = np.empty(indptr[row_groups[n]] - indptr[row_groups[0]], dtype=np.int32)
+    pos = 0
+    ptr[0] = 0
+    for v in range(n):  # each state's distinct successors, sorted
+        start = pos
+        for e in range(indptr[row_groups[v]], indptr[row_groups[v + 1]]):
+            x = indices[e]
+            i = pos
+            while i > start and succ[i - 1] > x:  # insertion, a short run
+                succ[i] = succ[i - 1]
+                i -= 1
+            if i > start and succ[i - 1] == x:  # a repeat: undo the shift
+                for r in range(i, pos):
+                    succ[r] = succ[r + 1]
+                continue
+            succ[i] = x
+            pos += 1
+        ptr[v + 1] = pos
+    rindex = np.zeros(n, dtype=np.int32)  # 0: not entered
+    acc = bits.copy()  # a state's own bits, and those of the components its edges enter
+    comp_bits = np.zeros(n, dtype=np.uint8)
+    stack = np.empty(n, dtype=np.int32)  # entered states whose root is not finished
+    work_v = np.empty(n, dtype=np.int32)
+    work_at = np.empty(n, dtype=np.int32)  # the next successor's position, descending
+    work_root = np.empty(n, dtype=np.bool_)
+    top = 0
+    index = 1
+    # the next completed component's rindex (its label n - c): above every entered
+    # state's index (at most the states entered and not completed, n - n_components)
+    c = n
+    for root in range(n):
+        if rindex[root]:
+            continue
+        v = root
+        depth = 0
+        entering = True
+        while True:
+            if entering:
+                rindex[v] = index
+                index += 1
+                work_v[depth] = v
+                work_at[depth] = ptr[v + 1] - 1
+                work_root[depth] = True
+                depth += 1
+            v = work_v[depth - 1]
+            at = work_at[depth - 1]
+            lo = ptr[v]
+            rv = rindex[v]
+            is_root = work_root[depth - 1]
+            entering = False
+            while at >= lo:
+                w = succ[at]
+                at -= 1
+                rw = rindex[w]
+                if rw == 0:
+                    entering = True
+                    break
+                if rw > c:  # a completed component: its bits are final
+                    acc[v] |= comp_bits[n - rw]
+                elif rw < rv:  # on the stack: in v's component, below v's root
+                    rv = rw
+                    is_root = False
+            rindex[v] = rv
+            work_root[depth - 1] = is_root
+            if entering:
+                work_at[depth - 1] = at
+                v = w
+                continue
+            depth -= 1
+            if is_root:  # v's component: v and the states above it on the stack
+                index -= 1
+                b = acc[v]
+                while top > 0 and rv <= rindex[stack[top - 1]]:
+                    top -= 1
+                    w = stack[top]
+                    rindex[w] = c
+                    index -= 1
+                    b |= acc[w]
+                rindex[v] = c
+                comp_bits[n - c] = b
+                c -= 1
+            else:
+                stack[top] = v
+                top += 1
+            if depth == 0:
+                break
+            u = work_v[depth - 1]
+            rv = rindex[v]
+            if rv > c:  # v's component completed below u
+                acc[u] |= comp_bits[n - rv]
+            elif rv < rindex[u]:
+                rindex[u] = rv
+                work_root[depth - 1] = False
+    n_comp = n - c
+    label = np.empty(n, dtype=np.int32)
+    reach = np.empty(n, dtype=np.uint8)
+    for s in range(n):
+        label[s] = n - rindex[s]
+        reach[s] = comp_bits[label[s]]
+    return n_comp, label, reach, ptr, succ[:pos]
+
+
+def reach_bits(seeds: np.ndarray) -> np.ndarray:
+    """``(n,)`` uint8: bit ``j`` of a state set iff ``seeds[:, j]`` (``(n, k)`` bool, ``k``
+    at most :data:`MAX_SEEDS`)."""
+    seeds = np.asarray(seeds, dtype=bool)
+    if seeds.ndim != 2 or seeds.shape[1] > MAX_SEEDS:
+        raise ValueError(f"seeds: expected an (n, k) mask with k <= {MAX_SEEDS}, "
+                         f"got shape {seeds.shape}")
+    bits = np.zeros(seeds.shape[0], dtype=np.uint8)
+    for j in range(seeds.shape[1]):
+        bits |= seeds[:, j].astype(np.uint8) << np.uint8(j)
+    return bits
+
+
+def warm_up() -> None:
+    """Compile (or link) :func:`components_reach` for the signature a solve passes
+    (:mod:`~mitld_lp.solvers.analysis_reach`: an int32 pattern, read-only row groups)."""
+    groups = np.array([0, 1, 2], dtype=np.int64)
+    groups.flags.writeable = False
+    components_reach(np.array([0, 1, 2], dtype=np.int32), np.array([1, 0], dtype=np.int32),
+                     groups, np.zeros(2, dtype=np.uint8))
