@@ -74,11 +74,14 @@ def whole(q: Quotient, block: Block) -> Block:
     rows read it after a refused jump), so a second copy of its moves inside was held
     beside it: QVBS ``consensus`` 6-2 ``disagree``'s block of 279,132 states (1.7
     million entries), the synthesis's resident peak in its jump 109.4 -> 105.3 bytes
-    a transition."""
+    a transition.  Its target probabilities are left out (``None``, as the swept
+    block's): both callers jump on each model with that model's own
+    (``replace(block, to_target=...)``), so the first model's, a float a choice, were
+    held through the jump unread."""
     if block.outer is not None:
         return block
     cut = Block.of(q, block.states)
-    return replace(cut, inner=block.inner)  # the cut's own inner freed here
+    return replace(cut, inner=block.inner, to_target=None)  # the cut's own freed here
 
 
 def renumbered(block: Block | list[Block], order: np.ndarray) -> Block:
