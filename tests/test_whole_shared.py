@@ -79,14 +79,16 @@ def test_whole_keeps_no_second_inner() -> None:
     assert kept < own + 64 * 1024 < own + inner_bytes
 
 
+CASES = [(seed, sense) for seed in range(3) for sense in (Sense.MAX, Sense.MIN)]
+
+
 @needs_numba
-@pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
-@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize(("seed", "sense"), CASES)
 def test_iteration_jumps_on_the_shared_block_to_the_same_bits(
         monkeypatch: pytest.MonkeyPatch, seed: int, sense: Sense) -> None:
-    mdp, choices = _dyadic_mdp(seed, 7)
-    _force_early(monkeypatch)
     calls: list[bool] = []
+    _force_early(monkeypatch)
+    mdp, choices = _dyadic_mdp(seed, 7)
 
     def recorded(q, block):
         got = whole(q, block)
