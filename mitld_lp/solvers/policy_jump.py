@@ -472,10 +472,15 @@ def jump(block: Block, lo: np.ndarray, hi: np.ndarray, tol: float,
     # the policy's own rows only (the same rows of the whole product)
     own_image = exit_own[chosen] + ld_product(block.inner, own_bound, chosen)
     own_ok = bool(np.all((own_image >= own_bound) if own == 0 else (own_image <= own_bound)))
+    # the exit times and the values below are columns of a round's two (long doubles):
+    # each copied alone, so the other column is not held through the rest of the jump
     del own_image, exit_own, v
+    t = t.copy()
     exit_every = _exit(block, (lo, hi)[every])
     chosen_best, w, _ = improve_ahead(block, exit_every, chosen, factors=factors,
                                       sense=sense, allowance=allowance)
+    w = w.copy()
+    del _
     # The shift must cover the slowest of the (nearly) optimal choices, not only the
     # policy's: W = u + max over the choices within a quarter of the threshold of P W.
     # loses = -gain(r + P w, w(owner)), made in place in the scores' array
