@@ -49,6 +49,7 @@ def early_jump(block: Block, rewards: np.ndarray, bounds: np.ndarray, first: np.
     own = 0 if sense is Sense.MAX else 1  # the first model's start (policy_jump.jump)
     exit_own = np.ascontiguousarray(exits[:, own])
     c = jump_cost.cost(block, start_policy(block, exit_own, first[:, own], sense), saved)
+    del exit_own  # a float a choice, not held through the jump (it makes its own)
     logger.debug("early jump on %d states: %.0f sweeps saved, %.1f rounds of %.1f "
                  "sweeps forecast (depth %d, %.3g LU multiplies)", block.states.size,
                  saved, c.rounds, c.round / c.sweep, c.depth, c.flops)
