@@ -43,18 +43,15 @@ def _closure(states, rows, indptr, indices, data, seed):  # pragma: no cover - c
     sweeps = 0
     changed = True
     while changed:
-        changed = False
         sweeps += 1
+        changed = False
         for i in range(states.shape[0] - 1, -1, -1):
-            s = states[i]
-            if reach[s]:
-                continue
-            r = rows[i]
-            for e in range(indptr[r], indptr[r + 1]):
-                if data[e] > 0.0 and reach[indices[e]]:
-                    reach[s] = True
-                    changed = True
-                    break
+            if not reach[states[i]]:
+                r = rows[i]
+                for e in range(indptr[r], indptr[r + 1]):
+                    if data[e] > 0.0 and reach[indices[e]]:
+                        reach[states[i]] = changed = True
+                        break
     return reach, sweeps
 
 
@@ -69,7 +66,8 @@ def sweeps_sets(states, rows, indptr, indices, data, target):
 @numba.njit(cache=False)
 def _tarjan(states, rows, indptr, indices, data, target):  # pragma: no cover - compiled
     """Per state, bit 0: a path to the target, bit 1: a path to a state without one;
-    by one iterative Tarjan search over the chain's edges."""
+    by one iterative Tarjan search over the chain's edges.  A state put on the call
+    stack is entered (numbered, stacked, flagged) at the top of the loop."""
     n = target.shape[0]
     rowof = np.full(n, -1, dtype=np.int64)
     for i in range(states.shape[0]):
@@ -79,7 +77,7 @@ def _tarjan(states, rows, indptr, indices, data, target):  # pragma: no cover - 
     flag = np.zeros(n, dtype=np.uint8)  # bits 0, 1 as above; 4: on the stack
     stack = np.empty(n, dtype=np.int32)
     call = np.empty(n, dtype=np.int32)
-    edge = np.empty(n, dtype=np.int64)
+    edge = np.empty(n, dtype=np.int64)  # each call's next entry; -1: not entered
     counter = 0
     top = 0
     for root in range(n):
@@ -87,46 +85,32 @@ def _tarjan(states, rows, indptr, indices, data, target):  # pragma: no cover - 
             continue
         cp = 0
         call[0] = root
-        index[root] = counter
-        low[root] = counter
-        counter += 1
-        stack[top] = root
-        top += 1
-        flag[root] = 5 if target[root] else 4
-        r = rowof[root]
-        edge[0] = indptr[r] if r >= 0 else 0
+        edge[0] = -1
         while cp >= 0:
             s = call[cp]
             r = rowof[s]
+            if edge[cp] < 0:
+                index[s] = low[s] = counter
+                counter += 1
+                stack[top] = s
+                top += 1
+                flag[s] = 5 if target[s] else 4
+                edge[cp] = indptr[r] if r >= 0 else 0
             e = edge[cp]
             end = indptr[r + 1] if r >= 0 else 0
-            down = False
-            while e < end:
+            while e < end and (not data[e] > 0.0 or index[indices[e]] >= 0):
                 t = indices[e]
-                p = data[e]
+                if data[e] > 0.0:  # seen: on the stack (a back edge) or closed
+                    if flag[t] & 4:
+                        low[s] = min(low[s], index[t])
+                    else:
+                        flag[s] |= flag[t] & 3
                 e += 1
-                if not p > 0.0:
-                    continue
-                if index[t] < 0:
-                    edge[cp] = e
-                    cp += 1
-                    call[cp] = t
-                    index[t] = counter
-                    low[t] = counter
-                    counter += 1
-                    stack[top] = t
-                    top += 1
-                    flag[t] = 5 if target[t] else 4
-                    rt = rowof[t]
-                    edge[cp] = indptr[rt] if rt >= 0 else 0
-                    down = True
-                    break
-                if flag[t] & 4:
-                    if index[t] < low[s]:
-                        low[s] = index[t]
-                else:
-                    flag[s] |= flag[t] & 3
-            if down:
+            if e < end:  # a new state: called
+                edge[cp] = e + 1
+                cp += 1
+                call[cp] = indices[e]
+                edge[cp] = -1
                 continue
             if low[s] == index[s]:  # a component closes: its flags settled together
                 acc = 0
@@ -144,8 +128,7 @@ def _tarjan(states, rows, indptr, indices, data, target):  # pragma: no cover - 
             cp -= 1
             if cp >= 0:
                 par = call[cp]
-                if low[s] < low[par]:
-                    low[par] = low[s]
+                low[par] = min(low[par], low[s])
                 flag[par] |= flag[s] & 3
     return flag
 
