@@ -289,8 +289,8 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     seeds = np.column_stack([goal] if same else [goal, wide])
     fused = fused_components_reaching(m, mdp.row_groups, seeds,
                                       attracted[0][j0] if minimum and without_one else None)
-    found, reach, back = components_reaching(m, mdp.row_groups, seeds) if fused is None \
-        else fused
+    found, reach, back, crowd = (*components_reaching(m, mdp.row_groups, seeds), None) \
+        if fused is None else fused
     del seeds, fused
     reach = reach[:, [0, 0] if same else [0, 1]]
     n = mdp.n_states
@@ -316,7 +316,8 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
         mecs, early = ends_and_sure(mdp, found.component, maybe, prob0[j0]) if without_one \
             else (end_components(mdp, found.component, maybe), None)
 
-    crowd = crowded(found.component)  # the only states the components' tests read
+    if crowd is None:  # the only states the components' tests read (else the fused pass's)
+        crowd = crowded(found.component)
     if found.level is None and mixed(found.component, maybe, crowd):  # the order as before
         found = replace(found, level=found.later())
     if found.level is not None or not may_split(found.component, maybe, crowd):
