@@ -41,6 +41,22 @@ def _matrix(rng: np.random.Generator, n: int, spread: int) -> tuple[sp.csr_array
     return m, groups
 
 
+def _forward(m: sp.csr_array, groups: np.ndarray) -> sp.csr_array:
+    """``m`` without its entries into a state below the choice's own: no cycle but
+    self-loops (a row left empty keeps its self-loop)."""
+    owner = np.repeat(np.arange(groups.size - 1), np.diff(groups))
+    rows, cols = [], []
+    for r in range(m.shape[0]):
+        ts = [int(t) for t in m.indices[m.indptr[r]:m.indptr[r + 1]] if t >= owner[r]]
+        for t in ts or [int(owner[r])]:
+            rows.append(r)
+            cols.append(t)
+    out = sp.csr_array((np.ones(len(rows)), (rows, cols)), shape=m.shape)
+    out.indices = out.indices.astype(np.int32)
+    out.indptr = out.indptr.astype(np.int32)
+    return out
+
+
 def _succ(m: sp.csr_array, groups: np.ndarray) -> list[set[int]]:
     return [{int(t) for r in range(groups[s], groups[s + 1])
              for t in m.indices[m.indptr[r]:m.indptr[r + 1]]} for s in range(groups.size - 1)]
@@ -102,10 +118,7 @@ def test_fused_record_matches_scipys_route(monkeypatch, spread: int, with_extra:
     rng = np.random.default_rng(8421 + spread)
     m, groups = _matrix(rng, 700, spread) if spread else _matrix(rng, 700, 1)
     if not spread:  # each choice's entries pointing forward only: no cycle but self-loops
-        m = sp.csr_array(sp.triu(sp.csr_array(
-            (m.data, m.indices, m.indptr), shape=m.shape), k=0, format="csr"))
-        m.indices = m.indices.astype(np.int32)
-        m.indptr = m.indptr.astype(np.int32)
+        m = _forward(m, groups)
     n = groups.size - 1
     seeds = rng.random((n, 2)) < 0.03
     extra = rng.random(n) < 0.02 if with_extra else None
@@ -134,3 +147,44 @@ def test_fused_record_matches_scipys_route(monkeypatch, spread: int, with_extra:
         assert np.array_equal(reached, _bfs_reaching(succ, extra))
     else:
         assert reached is None
+
+
+def _mdp(m: sp.csr_array, groups: np.ndarray):
+    from mitld_lp.mdp import MDP
+
+    n, c = groups.size - 1, int(groups[-1])
+    no = np.zeros(n, dtype=bool)
+    return MDP(matrix=m, row_groups=groups, choice_actions=np.zeros(c, dtype=np.int32),
+               action_names=(), initial=0, target=no, sink=no, truncated=no, states=range(n))
+
+
+@pytest.mark.parametrize("spread", [0, 2])
+def test_end_components_told_one_each_match_counted(spread: int) -> None:
+    """``one_each`` passed (as the analysis passes it from the fused pass's crowd) gives
+    the record the count gives, and :func:`singles` says what a ``Counter`` of SciPy's
+    labels says."""
+    from mitld_lp.solvers.analysis_ends import end_components, ends_and_sure, singles
+
+    rng = np.random.default_rng(8422 + spread)
+    m, groups = _matrix(rng, 500, max(spread, 1))
+    if not spread:  # forward entries only: every component one state, self-loops kept
+        m = _forward(m, groups)
+    mdp = _mdp(m, groups)
+    labels = _scipy_labels(_succ(m, groups))
+    one_each = max(Counter(labels.tolist()).values()) == 1
+    assert one_each == (not spread)
+    assert singles(labels) == one_each
+    maybe = rng.random(groups.size - 1) < 0.9
+    zero = ~maybe & (rng.random(groups.size - 1) < 0.5)
+    for told, counted in ((end_components(mdp, labels, maybe, one_each),
+                           end_components(mdp, labels, maybe)),
+                          (ends_and_sure(mdp, labels, maybe, zero, one_each)[0],
+                           ends_and_sure(mdp, labels, maybe, zero)[0])):
+        assert told.n_mecs == counted.n_mecs
+        assert np.array_equal(np.asarray(told.mec_of), np.asarray(counted.mec_of))
+        assert np.array_equal(np.asarray(told.internal), np.asarray(counted.internal))
+    if not spread:  # each maybe state with a choice that only loops is one, alone
+        loops = {s for s in np.flatnonzero(maybe) for r in range(groups[s], groups[s + 1])
+                 if set(m.indices[m.indptr[r]:m.indptr[r + 1]].tolist()) == {s}}
+        assert len(loops) > 10  # not vacuous
+        assert end_components(mdp, labels, maybe, True).n_mecs == len(loops)

@@ -309,15 +309,16 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
                                                                found.component):
         kernel_loader.prepare()  # the loader's pieces, else numba (without PyYAML)
         load_walks()  # the sweeps will load them: the walks below run compiled too
+    if crowd is None:  # the only states the components' tests read (else the fused pass's)
+        crowd = crowded(found.component)
     if not minimum:
         prob0 = [~reach[:, 0] & ~goal, ~reach[:, 1] & ~wide]
         maybe = reach[:, 1] & ~wide
+        # every component one state: no count of them there (crowd is empty iff so)
+        one_each = bool(found.component.size) and not crowd.size
         # with the goal's value-1 states where none (their attractor first: analysis_ends)
-        mecs, early = ends_and_sure(mdp, found.component, maybe, prob0[j0]) if without_one \
-            else (end_components(mdp, found.component, maybe), None)
-
-    if crowd is None:  # the only states the components' tests read (else the fused pass's)
-        crowd = crowded(found.component)
+        mecs, early = ends_and_sure(mdp, found.component, maybe, prob0[j0], one_each) \
+            if without_one else (end_components(mdp, found.component, maybe, one_each), None)
     if found.level is None and mixed(found.component, maybe, crowd):  # the order as before
         found = replace(found, level=found.later())
     if found.level is not None or not may_split(found.component, maybe, crowd):
