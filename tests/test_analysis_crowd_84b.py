@@ -3,12 +3,12 @@
 :func:`~mitld_lp.solvers.analysis_reach.fused_components_reaching`), checked against
 routes written here: the components from SciPy's ``connected_components`` on a state
 graph built in the test from sets of successors, their sizes counted with a ``Counter``,
-and reach by a breadth-first search of the reversed graph.  The kernel is run as Python
+and reach by a fixpoint of the successors' sets.  The kernel is run as Python
 (its ``py_func``): no compiled cache is read or written."""
 
 from __future__ import annotations
 
-from collections import Counter, deque
+from collections import Counter
 from types import SimpleNamespace
 
 import numpy as np
@@ -70,18 +70,16 @@ def _scipy_labels(succ: list[set[int]]) -> np.ndarray:
     return connected_components(graph, directed=True, connection="strong")[1]
 
 
-def _bfs_reaching(succ: list[set[int]], seeds: np.ndarray) -> np.ndarray:
-    preds: list[list[int]] = [[] for _ in succ]
-    for s, ts in enumerate(succ):
-        for t in ts:
-            preds[t].append(s)
+def _reaching_fixpoint(succ: list[set[int]], seeds: np.ndarray) -> np.ndarray:
+    """The states with a path to a seed (seeds included): a fixpoint of "some successor
+    reaches", swept forward until nothing changes (not a search of the reversed graph)."""
     found = seeds.copy()
-    queue = deque(np.flatnonzero(seeds).tolist())
-    while queue:
-        for s in preds[queue.popleft()]:
-            if not found[s]:
-                found[s] = True
-                queue.append(s)
+    changed = True
+    while changed:
+        changed = False
+        for s, ts in enumerate(succ):
+            if not found[s] and any(found[t] for t in ts):
+                found[s] = changed = True
     return found
 
 
@@ -98,7 +96,7 @@ def test_kernel_crowd_is_the_states_of_components_of_two_or_more(seed: int) -> N
     assert crowd.tolist() == [s for s, c in enumerate(expected) if sizes[c] > 1]
     assert np.array_equal(crowd, crowded(label))  # the route it replaces
     for j in range(2):
-        assert np.array_equal(reach[:, j], _bfs_reaching(succ, seeds[:, j]))
+        assert np.array_equal(reach[:, j], _reaching_fixpoint(succ, seeds[:, j]))
 
 
 def _forced(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -144,7 +142,7 @@ def test_fused_record_matches_scipys_route(monkeypatch, spread: int, with_extra:
         assert crowd.size > 0
     if with_extra:
         assert reached is not None and reached.flags.c_contiguous
-        assert np.array_equal(reached, _bfs_reaching(succ, extra))
+        assert np.array_equal(reached, _reaching_fixpoint(succ, extra))
     else:
         assert reached is None
 
