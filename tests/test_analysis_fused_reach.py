@@ -71,8 +71,8 @@ def test_labels_are_scipys_and_reach_is_a_bfs(seed: int, index: type) -> None:
     n = int(rng.integers(0, 60)) if seed else 0
     indptr, indices, groups = _random_pattern(rng, n, index)
     seeds = rng.random((n, 3)) < 0.1
-    n_comp, label, bits, ptr, got = KERNEL(indptr, indices, groups,
-                                           analysis_kernels.reach_bits(seeds))
+    n_comp, label, reach, crowd, ptr, got = KERNEL(indptr, indices, groups,
+                                                   analysis_kernels.seed_columns(seeds))
     succ = _successors(indptr, indices, groups)
     assert [got[ptr[s]:ptr[s + 1]].tolist() for s in range(n)] == [sorted(t) for t in succ]
     assert ptr.dtype == got.dtype == np.int32
@@ -82,9 +82,13 @@ def test_labels_are_scipys_and_reach_is_a_bfs(seed: int, index: type) -> None:
     expected_n, expected = connected_components(graph, directed=True, connection="strong")
     assert n_comp == expected_n
     assert label.tolist() == expected.tolist()
+    assert reach.shape == (n, 3) and reach.dtype == bool
     for j in range(3):
-        got = ((bits >> j) & 1).astype(bool)
-        assert got.tolist() == _reaching(succ, seeds[:, j]).tolist()
+        assert reach[:, j].tolist() == _reaching(succ, seeds[:, j]).tolist()
+    # the states of SciPy's components of more than one state, counted here
+    sizes = np.bincount(expected, minlength=expected_n)
+    assert crowd.dtype == np.int32
+    assert crowd.tolist() == [s for s in range(n) if sizes[expected[s]] > 1]
 
 
 def test_the_last_state_entered_is_not_taken_for_a_completed_one() -> None:
@@ -96,27 +100,30 @@ def test_the_last_state_entered_is_not_taken_for_a_completed_one() -> None:
     groups = np.array([0, 1, 2, 3], dtype=np.int64)
     seeds = np.array([[True], [False], [False]])
     for kernel in (KERNEL, analysis_kernels.components_reach):
-        n_comp, label, bits, _, _ = kernel(indptr, indices, groups,
-                                           analysis_kernels.reach_bits(seeds))
+        n_comp, label, reach, crowd, _, _ = kernel(indptr, indices, groups,
+                                                   analysis_kernels.seed_columns(seeds))
         assert int(n_comp) == 3 and label.tolist() == [0, 2, 1]
-        assert bits.tolist() == [1, 0, 0]
+        assert reach[:, 0].tolist() == [True, False, False]
+        assert crowd.size == 0  # self-loops are components of one state
 
 
 def test_compiled_kernel_matches_its_code_on_the_warm_signature() -> None:
     rng = np.random.default_rng(84)
     indptr, indices, groups = _random_pattern(rng, 500, np.int32)
     groups.flags.writeable = False
-    bits = analysis_kernels.reach_bits(rng.random((500, 2)) < 0.05)
-    got = analysis_kernels.components_reach(indptr, indices, groups, bits)
-    want = KERNEL(indptr, indices, groups, bits)
+    seeds = analysis_kernels.seed_columns(rng.random((500, 2)) < 0.05)
+    got = analysis_kernels.components_reach(indptr, indices, groups, seeds)
+    want = KERNEL(indptr, indices, groups, seeds)
     assert int(got[0]) == int(want[0])
     for a, b in zip(got[1:], want[1:], strict=True):
         assert a.dtype == b.dtype and np.array_equal(a, b)
 
 
-def test_reach_bits_names_a_bad_shape() -> None:
+def test_seed_columns_names_a_bad_shape() -> None:
     with pytest.raises(ValueError, match="seeds"):
-        analysis_kernels.reach_bits(np.zeros((3, 9), dtype=bool))
+        analysis_kernels.seed_columns(np.zeros((3, 9), dtype=bool))
+    with pytest.raises(ValueError, match="seeds"):
+        analysis_kernels.seed_columns(np.zeros(3, dtype=bool))
 
 
 def _product(rng: np.random.Generator, n: int) -> tuple[MDP, np.ndarray, np.ndarray]:
@@ -151,7 +158,7 @@ def _product(rng: np.random.Generator, n: int) -> tuple[MDP, np.ndarray, np.ndar
 def _fused_forced(monkeypatch: pytest.MonkeyPatch, taken: list) -> None:
     """The fused route taken whatever the load and cache (the kernel run as Python)."""
     monkeypatch.setattr(analysis_reach, "_kernels", lambda: SimpleNamespace(
-        components_reach=KERNEL, reach_bits=analysis_kernels.reach_bits))
+        components_reach=KERNEL, seed_columns=analysis_kernels.seed_columns))
     inner = analysis_reach.fused_components_reaching
 
     def spy(*args, **kwargs):

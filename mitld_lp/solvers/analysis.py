@@ -289,8 +289,8 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     seeds = np.column_stack([goal] if same else [goal, wide])
     fused = fused_components_reaching(m, mdp.row_groups, seeds,
                                       attracted[0][j0] if minimum and without_one else None)
-    found, reach, back = components_reaching(m, mdp.row_groups, seeds) if fused is None \
-        else fused
+    found, reach, back, crowd = (*components_reaching(m, mdp.row_groups, seeds), None) \
+        if fused is None else fused
     del seeds, fused
     reach = reach[:, [0, 0] if same else [0, 1]]
     n = mdp.n_states
@@ -309,14 +309,16 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
                                                                found.component):
         kernel_loader.prepare()  # the loader's pieces, else numba (without PyYAML)
         load_walks()  # the sweeps will load them: the walks below run compiled too
+    if crowd is None:  # the only states the components' tests read (else the fused pass's)
+        crowd = crowded(found.component)
     if not minimum:
         prob0 = [~reach[:, 0] & ~goal, ~reach[:, 1] & ~wide]
         maybe = reach[:, 1] & ~wide
+        # every component one state: no count of them there (crowd is empty iff so)
+        one_each = bool(found.component.size) and not crowd.size
         # with the goal's value-1 states where none (their attractor first: analysis_ends)
-        mecs, early = ends_and_sure(mdp, found.component, maybe, prob0[j0]) if without_one \
-            else (end_components(mdp, found.component, maybe), None)
-
-    crowd = crowded(found.component)  # the only states the components' tests read
+        mecs, early = ends_and_sure(mdp, found.component, maybe, prob0[j0], one_each) \
+            if without_one else (end_components(mdp, found.component, maybe, one_each), None)
     if found.level is None and mixed(found.component, maybe, crowd):  # the order as before
         found = replace(found, level=found.later())
     if found.level is not None or not may_split(found.component, maybe, crowd):

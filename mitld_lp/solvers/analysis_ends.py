@@ -38,7 +38,7 @@ from mitld_lp.solvers.value_one import SureStrategy
 from mitld_lp.solvers.walks import compiled_walks
 from mitld_lp.util.arrays import index_dtype
 
-__all__ = ["end_components", "ends_and_sure", "may_cycle"]
+__all__ = ["end_components", "ends_and_sure", "may_cycle", "singles"]
 
 
 def may_cycle(mdp: MDP, comp: np.ndarray) -> np.ndarray:
@@ -102,7 +102,14 @@ def _self_loops_only(mdp: MDP, maybe: np.ndarray) -> EndComponents:
     return EndComponents(read_only(mec_of), read_only(internal), int(members.size))
 
 
-def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponents:
+def singles(comp: np.ndarray) -> bool:
+    """Whether ``comp`` labels some state and every component holds one state (a count
+    a component; the analysis's fused pass knows it without one: ``singles`` below)."""
+    return bool(comp.size) and int(np.bincount(comp).max()) == 1
+
+
+def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray,
+                   one_each: bool | None = None) -> EndComponents:
     """The maximal end components of the ``maybe`` states (module docs), given each
     state's strongly connected component ``comp`` in ``mdp``'s support graph: searched
     by :func:`~mitld_lp.solvers.graph.maximal_end_components` on the sub-MDP of the
@@ -112,11 +119,12 @@ def end_components(mdp: MDP, comp: np.ndarray, maybe: np.ndarray) -> EndComponen
     walks, when one attractor pass shows there is none (:func:`_none_among`).  The
     same components as :func:`~mitld_lp.solvers.graph.maximal_end_components` on
     ``maybe``, numbered in another order (which it is, on a matrix that stores a
-    zero).  Where every component is one state, :func:`_self_loops_only`."""
+    zero).  Where every component is one state, :func:`_self_loops_only`; ``one_each``:
+    whether it is (:func:`singles`), where the caller knows (else counted here)."""
     m = mdp.matrix
     if m.nnz and not bool(np.all(m.data > 0)):  # a stored zero is no edge: not a loop
         return maximal_end_components(mdp, maybe)
-    if comp.size and int(np.bincount(comp).max()) == 1:  # acyclic apart from self-loops
+    if singles(comp) if one_each is None else one_each:  # acyclic apart from self-loops
         return _self_loops_only(mdp, maybe)
     return _searched(mdp, comp, maybe)
 
@@ -175,21 +183,25 @@ def _none_among(walks: Any, m: sp.csr_array, groups: np.ndarray, maybe: np.ndarr
 
 
 def ends_and_sure(mdp: MDP, comp: np.ndarray, maybe: np.ndarray, zero: np.ndarray,
+                  one_each: bool | None = None,
                   ) -> tuple[EndComponents, tuple[np.ndarray, SureStrategy | None] | None]:
     """:func:`end_components` of the ``maybe`` states, and where there is none and the
     compiled walks search them, :func:`~mitld_lp.solvers.analysis_singles.
     prob1e_on_product`'s answer for the prob-0 states ``zero`` (else None: the caller
     finds it): its attractor first, then the end components' test on the maybe states
-    it leaves alone (module docs).  The same components, sets and strategy."""
+    it leaves alone (module docs).  The same components, sets and strategy.  ``one_each``:
+    :func:`end_components`'s (counted once here where the caller passes None)."""
     m = mdp.matrix
     walks = compiled_walks(m.nnz)
-    if (walks is None or not walks.fits(max(mdp.n_states, mdp.n_choices), m.nnz)
-            or (m.nnz and not bool(np.all(m.data > 0)))
-            or (comp.size and int(np.bincount(comp).max()) == 1)):
-        return end_components(mdp, comp, maybe), None
+    if walks is None or not walks.fits(max(mdp.n_states, mdp.n_choices), m.nnz) \
+            or (m.nnz and not bool(np.all(m.data > 0))):
+        return end_components(mdp, comp, maybe, one_each), None
+    one_each = singles(comp) if one_each is None else one_each
+    if one_each:
+        return end_components(mdp, comp, maybe, one_each), None
     got = product_attractor(mdp, m, maybe, zero, None)
     if got is None:  # the targets not closed: the copied pattern's route
-        return end_components(mdp, comp, maybe), None
+        return end_components(mdp, comp, maybe, one_each), None
     sure = maybe & ~got[0]
     # the maybe states the attractor left, and those it started from: a maybe state of
     # prob 0 for the goal (it reaches a truncated state only) may lie in an end component

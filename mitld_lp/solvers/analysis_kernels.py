@@ -16,7 +16,11 @@ the whole pattern), and returned for the condensation a caller may walk later.  
 seed sets a component reaches is found as it is completed, every
 component it reaches being complete then: a bit a seed set, OR-ed from the members'
 seeds and from each edge into a completed component, as the edge is crossed (no second
-pass over the entries).  Imported only where the compiled walks are (the kernel loader's
+pass over the entries).  The seed masks are read, and each state's reach written, as
+bool columns in the same call, and each component's size, known as it completes, marks
+the states of components of more than one state (no NumPy pass over the states for the
+bits, their unpacking or :func:`~mitld_lp.solvers.quotient_order.crowded`'s count).
+Imported only where the compiled walks are (the kernel loader's
 cache, else numba)."""
 
 from __future__ import annotations
@@ -27,19 +31,23 @@ from mitld_lp.util import kernel_loader
 
 numba = kernel_loader.lazy_numba(globals())
 
-__all__ = ["MAX_SEEDS", "components_reach", "reach_bits", "warm_up"]
+__all__ = ["MAX_SEEDS", "components_reach", "seed_columns", "warm_up"]
 
 MAX_SEEDS = 8
 """The most seed sets one call reads (a bit each of a byte)."""
 
 
 @numba.njit(cache=True, nogil=True)
-def components_reach(indptr, indices, row_groups, bits):  # pragma: no cover - compiled
-    """``(n_components, label, reach, ptr, succ)`` of the state graph of the choice matrix
-    ``indptr, indices`` (state ``s``'s choices are rows ``row_groups[s]:row_groups[s+1]``;
-    its states and entries below 2**31 - 1): ``label`` (int32) each state's component,
-    numbered as completed (module docs); ``reach`` (uint8) each state's bits: bit ``j``
-    set iff it reaches a state whose ``bits`` has bit ``j`` set (itself included);
+def components_reach(indptr, indices, row_groups, seeds):  # pragma: no cover - compiled
+    """``(n_components, label, reach, crowd, ptr, succ)`` of the state graph of the choice
+    matrix ``indptr, indices`` (state ``s``'s choices are rows
+    ``row_groups[s]:row_groups[s+1]``; its states and entries below 2**31 - 1), for the
+    seed sets ``seeds`` (``(n, k)`` bool, C order, ``k`` at most :data:`MAX_SEEDS`, each
+    column a bit of a byte here): ``label`` (int32) each state's component, numbered as
+    completed (module docs); ``reach`` (``(n, k)`` bool) whether each state reaches a
+    state of each seed set (itself included); ``crowd`` (int32, ascending) the states
+    whose component holds more than one state (:func:`~mitld_lp.solvers.quotient_order.
+    crowded`'s, each component's size known as it completes: no count over the labels);
     ``ptr, succ`` the state graph (int32 CSR, each row sorted, without repeats: SciPy's
     route's, :func:`~mitld_lp.solvers.graph.graph_view`), built first, a state at a time
     in order (the rows read in stored order: 0.03 s against 0.035 entering each state's
@@ -68,8 +76,17 @@ def components_reach(indptr, indices, row_groups, bits):  # pragma: no cover - c
             pos += 1
         ptr[v + 1] = pos
     rindex = np.zeros(n, dtype=np.int32)  # 0: not entered
-    acc = bits.copy()  # a state's own bits, and those of the components its edges enter
+    k = seeds.shape[1]
+    # a state's own bits, and those of the components its edges enter
+    acc = np.zeros(n, dtype=np.uint8)
+    for s in range(n):
+        own = 0
+        for j in range(k):
+            if seeds[s, j]:
+                own |= 1 << j
+        acc[s] = own
     comp_bits = np.zeros(n, dtype=np.uint8)
+    many = np.zeros(n, dtype=np.bool_)  # a completed component holds more than one state
     stack = np.empty(n, dtype=np.int32)  # entered states whose root is not finished
     work_v = np.empty(n, dtype=np.int32)
     work_at = np.empty(n, dtype=np.int32)  # the next successor's position, descending
@@ -121,14 +138,17 @@ def components_reach(indptr, indices, row_groups, bits):  # pragma: no cover - c
             if is_root:  # v's component: v and the states above it on the stack
                 index -= 1
                 b = acc[v]
+                members = 1
                 while top > 0 and rv <= rindex[stack[top - 1]]:
                     top -= 1
                     w = stack[top]
                     rindex[w] = c
                     index -= 1
                     b |= acc[w]
+                    members += 1
                 rindex[v] = c
                 comp_bits[n - c] = b
+                many[n - c] = members > 1
                 c -= 1
             else:
                 stack[top] = v
@@ -144,24 +164,29 @@ def components_reach(indptr, indices, row_groups, bits):  # pragma: no cover - c
                 work_root[depth - 1] = False
     n_comp = n - c
     label = np.empty(n, dtype=np.int32)
-    reach = np.empty(n, dtype=np.uint8)
+    reach = np.empty((n, k), dtype=np.bool_)
+    crowd = np.empty(n, dtype=np.int32)
+    n_crowd = 0
     for s in range(n):
-        label[s] = n - rindex[s]
-        reach[s] = comp_bits[label[s]]
-    return n_comp, label, reach, ptr, succ[:pos]
+        comp = n - rindex[s]
+        label[s] = comp
+        b = comp_bits[comp]
+        for j in range(k):
+            reach[s, j] = ((b >> j) & 1) != 0
+        if many[comp]:
+            crowd[n_crowd] = s
+            n_crowd += 1
+    return n_comp, label, reach, crowd[:n_crowd], ptr, succ[:pos]
 
 
-def reach_bits(seeds: np.ndarray) -> np.ndarray:
-    """``(n,)`` uint8: bit ``j`` of a state set iff ``seeds[:, j]`` (``(n, k)`` bool, ``k``
-    at most :data:`MAX_SEEDS`)."""
-    seeds = np.asarray(seeds, dtype=bool)
+def seed_columns(seeds: np.ndarray) -> np.ndarray:
+    """``seeds`` as :func:`components_reach` reads them: ``(n, k)`` bool in C order, ``k``
+    at most :data:`MAX_SEEDS` (a bit each of a byte); a bad shape named."""
+    seeds = np.asarray(seeds)
     if seeds.ndim != 2 or seeds.shape[1] > MAX_SEEDS:
         raise ValueError(f"seeds: expected an (n, k) mask with k <= {MAX_SEEDS}, "
                          f"got shape {seeds.shape}")
-    bits = np.zeros(seeds.shape[0], dtype=np.uint8)
-    for j in range(seeds.shape[1]):
-        bits |= seeds[:, j].astype(np.uint8) << np.uint8(j)
-    return bits
+    return np.ascontiguousarray(seeds, dtype=bool)
 
 
 def warm_up() -> None:
@@ -170,4 +195,4 @@ def warm_up() -> None:
     groups = np.array([0, 1, 2], dtype=np.int64)
     groups.flags.writeable = False
     components_reach(np.array([0, 1, 2], dtype=np.int32), np.array([1, 0], dtype=np.int32),
-                     groups, np.zeros(2, dtype=np.uint8))
+                     groups, np.zeros((2, 1), dtype=bool))

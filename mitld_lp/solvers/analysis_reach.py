@@ -48,11 +48,13 @@ def _kernels() -> Any:
 
 def fused_components_reaching(matrix: sp.csr_array, row_groups: np.ndarray, seeds: np.ndarray,
                               extra: np.ndarray | None = None,
-                              ) -> tuple[Levels, np.ndarray, np.ndarray | None] | None:
-    """``(found, reach, reached)``: :func:`~mitld_lp.solvers.graph.components_reaching`'s
-    first two for ``seeds`` (``(n, k)`` bool) from one compiled pass, and the states
-    reaching an ``extra`` state (None without it); None where its route is not taken
-    (module docs)."""
+                              ) -> tuple[Levels, np.ndarray, np.ndarray | None, np.ndarray] | None:
+    """``(found, reach, reached, crowd)``: :func:`~mitld_lp.solvers.graph.
+    components_reaching`'s first two for ``seeds`` (``(n, k)`` bool) from one compiled
+    pass, the states reaching an ``extra`` state (None without it), and
+    :func:`~mitld_lp.solvers.quotient_order.crowded`'s states of ``found.component``
+    (the same array: int64 and empty where every component is one state); None where
+    its route is not taken (module docs)."""
     n = row_groups.shape[0] - 1
     if (matrix.nnz < analysis_gates.PAID_MIN_ENTRIES or n + matrix.nnz <= SMALL
             or matrix.indices.dtype != np.int32
@@ -63,21 +65,22 @@ def fused_components_reaching(matrix: sp.csr_array, row_groups: np.ndarray, seed
     if kernels is None:
         return None
     k = seeds.shape[1]
-    columns = seeds if extra is None else np.column_stack([seeds, extra])
+    columns = kernels.seed_columns(seeds if extra is None else np.column_stack([seeds, extra]))
     groups = np.asarray(row_groups)
     if groups.flags.writeable:  # one signature: the product's row groups are read-only
         groups = groups.view()
         groups.flags.writeable = False
-    n_comp, label, bits, ptr, succ = kernels.components_reach(
-        matrix.indptr, matrix.indices, groups, kernels.reach_bits(columns))
+    n_comp, label, both, crowd, ptr, succ = kernels.components_reach(
+        matrix.indptr, matrix.indices, groups, columns)
+    del columns
     size = n + int(succ.size)
     if size <= SMALL:  # walked in plain Python by SciPy's route: its numbering
         return None
-    reach = np.empty((n, k), dtype=bool)
-    for j in range(k):
-        reach[:, j] = (bits >> np.uint8(j)) & np.uint8(1)
-    reached = None if extra is None else ((bits >> np.uint8(k)) & np.uint8(1)).astype(bool)
-    del bits
+    reach = both if extra is None else np.ascontiguousarray(both[:, :k])
+    reached = None if extra is None else np.ascontiguousarray(both[:, k])
+    del both
+    if not crowd.size:  # crowded's empty answer, in its type
+        crowd = np.zeros(0, dtype=np.int64)
     n_comp = int(n_comp)
     # SciPy's route keeps int64 labels where it condenses (few components: the levels are
     # walked, so the state graph is kept for them here), else its int32 and no graph
@@ -94,4 +97,4 @@ def fused_components_reaching(matrix: sp.csr_array, row_groups: np.ndarray, seed
         del graph
         return leveled(size, n_comp, c, out_degree, preds_of, None).level
 
-    return Levels(comp, None, None, later), reach, reached  # type: ignore[arg-type]
+    return Levels(comp, None, None, later), reach, reached, crowd  # type: ignore[arg-type]

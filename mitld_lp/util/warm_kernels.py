@@ -87,7 +87,7 @@ SIGNATURES: dict[str, dict[str, tuple[str, ...]]] = {
     },
     "mitld_lp.solvers.analysis_kernels": {
         "components_reach": (
-            "i4/1C i4/1C i8/1C/ro u1/1C",
+            "i4/1C i4/1C i8/1C/ro b1/2C",
         ),
     },
     "mitld_lp.solvers.certify_kernels": {
