@@ -489,6 +489,9 @@ def interval_iterations(
     if precision is not None and not (0.0 < precision < 1.0):
         raise ValueError(f"precision: a relative precision in (0, 1), got {precision!r}")
     n, k = q.n_states, len(quotients)
+    decided = gap == "initial" and q.initial < 0
+    if topological and n and not decided and q.order.n_levels >= RUNS_MIN_LEVELS:
+        shared_levels(q, q.order)  # _topological's levels, built before the arrays below
     rewards = np.repeat(np.column_stack([o.to_target for o in quotients]), 2, axis=1)
     bounds = np.zeros((n, 2 * k))
     for j, o in enumerate(quotients):
@@ -496,7 +499,6 @@ def interval_iterations(
     budget = _Budget(max_iterations, start + time_limit if time_limit is not None else np.inf)
     bar = progress_bar(progress if n >= _PROGRESS_MIN_STATES else False, total=None,
                        desc="interval iteration", unit="it", leave=False)
-    decided = gap == "initial" and q.initial < 0
     try:
         if n and not decided:
             if topological:
@@ -519,6 +521,7 @@ def interval_iterations(
                         bounds, tol, precision, q.sense, budget, gap, q.initial, bar)
     finally:
         bar.close()
+    del rewards  # read by the sweeps alone: gone before the records' columns are copied
     np.clip(bounds, 0.0, 1.0, out=bounds)  # rounding can push the upper bound past 1
     seconds = time.perf_counter() - start
     return [_result(mdp, o, bounds[:, 2 * j:2 * j + 2], tol, precision, gap, decided,

@@ -144,6 +144,7 @@ class Index:
 
     _EMPTY = -(1 << 62)
     _SPARSE = 8  # the dense array holds at most this many slots per entry (past 64K)
+    _CHUNK = 1 << 16  # entries placed (and slots moved in a rehash) at a time
 
     def __init__(self, dense: int = 0) -> None:
         self.dense_limit = dense
@@ -206,35 +207,60 @@ class Index:
                 self.dense[keys] = ids
                 self.size += keys.size
                 return
-            known = np.flatnonzero(self.dense >= 0)  # to a hash table, for good
-            held = self.dense[known]
-            self.dense, self.size = None, 0
+            dense, self.dense, self.size = self.dense, None, 0  # to a hash table, for good
             self._empty_table()
-            self.insert(known, held)
-        if 2 * (self.size + keys.size) > (1 << self.bits):
-            old_keys, old_ids = self.keys[self.keys != self._EMPTY], self.ids[
-                self.keys != self._EMPTY]
-            while 2 * (self.size + keys.size) > (1 << self.bits):
-                self.bits += 1
-            self._empty_table()
-            self.size = 0
-            self.insert(old_keys, old_ids)
-        pos = self._home(keys)
-        todo = np.arange(keys.size)
+            self._grow(int(np.count_nonzero(dense >= 0)) + keys.size)
+            for lo in range(0, dense.size, self._CHUNK):  # a slice at a time: no copy of all
+                held = dense[lo : lo + self._CHUNK]
+                known = np.flatnonzero(held >= 0)
+                self._place(known + lo, held[known])
+            del dense
+        self._grow(self.size + keys.size)
+        self._place(keys, ids)
+
+    def _grow(self, need: int) -> None:
+        """Make room for ``need`` entries at load at most 1/2: a table of twice the
+        slots or more.  The old table's entries are gathered a slice at a time and the
+        old table let go before the new one is made; each slice's entries are let go
+        once placed (no hashes nor probes of all the entries at once)."""
+        if 2 * need <= (1 << self.bits):
+            return
+        held = []
+        for lo in range(0, self.keys.size, self._CHUNK):
+            part = self.keys[lo : lo + self._CHUNK]
+            full = np.flatnonzero(part != self._EMPTY)
+            held.append((part[full], self.ids[lo : lo + self._CHUNK][full]))
+        part = None  # a view: it would hold the old keys through the new table's making
+        self.keys = self.ids = np.zeros(0, dtype=np.int64)
+        while 2 * need > (1 << self.bits):
+            self.bits += 1
+        self._empty_table()
+        self.size = 0
+        held.reverse()
+        while held:
+            self._place(*held.pop())
+
+    def _place(self, keys: np.ndarray, ids: np.ndarray) -> None:
+        """Write distinct new keys into a table with room for them, ``_CHUNK`` keys at
+        a time (the probes' work arrays bounded by a chunk, not by the batch)."""
         mask = (1 << self.bits) - 1
-        while todo.size:
-            at = pos[todo]
-            free = self.keys[at] == self._EMPTY
-            # one winner per free slot; the others probe on
-            _, first = np.unique(at[free], return_index=True)
-            win = todo[free][first]
-            self.keys[pos[win]] = keys[win]
-            self.ids[pos[win]] = ids[win]
-            placed = np.zeros(keys.size, dtype=bool)
-            placed[win] = True
-            todo = todo[~placed[todo]]
-            pos[todo] = (pos[todo] + 1) & mask
-        self.size += keys.size
+        for lo in range(0, keys.size, self._CHUNK):
+            part, part_ids = keys[lo : lo + self._CHUNK], ids[lo : lo + self._CHUNK]
+            pos = self._home(part)
+            todo = np.arange(part.size)
+            while todo.size:
+                at = pos[todo]
+                free = self.keys[at] == self._EMPTY
+                # one winner per free slot; the others probe on
+                _, first = np.unique(at[free], return_index=True)
+                win = todo[free][first]
+                self.keys[pos[win]] = part[win]
+                self.ids[pos[win]] = part_ids[win]
+                placed = np.zeros(part.size, dtype=bool)
+                placed[win] = True
+                todo = todo[~placed[todo]]
+                pos[todo] = (pos[todo] + 1) & mask
+            self.size += part.size
 
 
 def ranks(counts: np.ndarray) -> np.ndarray:
