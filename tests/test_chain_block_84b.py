@@ -9,11 +9,13 @@ HiGHS's LP optimum on ring-shaped MDPs with end components, both senses."""
 
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
 from test_cert_fast_exact import model_of_rows
-from test_cert_small_exact import paid_kernels
+from test_cert_small_exact import exact_optimum, paid_kernels
 from test_cert_verdicts_84 import lp_optimum
 
 from mitld_lp.solvers import certify as C
@@ -23,8 +25,9 @@ from mitld_lp.solvers.rounding import rounding
 ONE_COMPONENT = CH.one_component  # (the spies below replace it)
 
 
-def ring_model(seed: int, n: int):
-    """``n`` unknown states, the target ``n`` and the sink ``n + 1``.  Each unknown
+def ring_model(seed: int, n: int, exact: bool = False):
+    """(With ``exact``: also the model in fractions, as ``model_of_rows`` gives it.)
+    ``n`` unknown states, the target ``n`` and the sink ``n + 1``.  Each unknown
     state has a choice to the next state of a ring (and, mostly, the target and the
     sink), so that they form one component of the support graph, and 0-2 more: a
     self-loop or a split between two unknown states (end components), or a few states
@@ -53,7 +56,8 @@ def ring_model(seed: int, n: int):
             choices.append(dict(zip(succ, (w / w.sum()).tolist(), strict=True)))
         rows.append(choices)
     rows += [[], []]
-    return model_of_rows(rows, target, sink)[0]
+    both = model_of_rows(rows, target, sink)
+    return both if exact else both[0]
 
 
 def _chain(mdp, policy, monkeypatch, direct: bool, guess=None):
@@ -158,3 +162,35 @@ def test_brackets_hold_the_lp_optimum_on_rings(seed, upper, monkeypatch) -> None
         assert 0.0 <= cert.lower <= cert.upper <= 1.0
         brackets.add((cert.lower.hex(), cert.upper.hex(), cert.certified))
     assert len(brackets) == 1
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_brackets_hold_the_exact_optimum_in_fractions(seed, monkeypatch) -> None:
+    """On rings of five states, the brute force's optimum in exact fractions (every
+    deterministic policy solved in rational arithmetic, ``test_cert_small_exact``) lies
+    inside the certificate of its optimal policy, compared as fractions with no
+    tolerance, with the chain by the direct block and by the level loop: the same
+    bits."""
+    paid_kernels(monkeypatch, True)
+    mdp, exact = ring_model(seed, 5, exact=True)
+    target = np.asarray(mdp.target)
+    fired = []
+
+    def spy(comp):
+        got = ONE_COMPONENT(comp)
+        fired.append(got)
+        return got
+
+    for upper in (True, False):
+        v, policy = exact_optimum(mdp, exact, 5, upper)
+        zero = np.array([p == 0 for p in v])
+        one = None if upper else np.array([p == 1 for p in v])
+        got = set()
+        for direct in (True, False):
+            monkeypatch.setattr(CH, "one_component", spy if direct else (lambda comp: False))
+            cert = C.certify(mdp, target, policy, sense="max" if upper else "min",
+                             zero=zero, one=one)
+            assert Fraction(cert.lower) <= v[0] <= Fraction(cert.upper), (upper, v[0], cert)
+            got.add((cert.lower.hex(), cert.upper.hex(), cert.certified))
+        assert len(got) == 1
+    assert any(fired)  # the direct block ran on this ring
