@@ -163,14 +163,24 @@ def link(obj: bytes, resolve: Callable[[str], int | None]) -> Linked:
     sections = _sections(obj)
     loaded = _loaded_sections(sections)
     symbols, table = _symbols(obj, sections)
-    strings = sections[table.link].offset
+    strings = sections[table.link]
+    text = obj[strings.offset:strings.offset + strings.size]
+    if text.isascii():  # (numba's names are) read as one str, each name a slice of it
+        text = text.decode("ascii")
 
-    def name_of(sym: int) -> str:
-        st_name = symbols[sym][0]
-        return _name(obj, strings + st_name) if st_name else ""
+        def name_of(sym: int) -> str:
+            st_name = symbols[sym][0]
+            end = text.find("\0", st_name)
+            if end < 0:
+                raise Refused("a name runs past the end of the string table")
+            return text[st_name:end]
+    else:
+        def name_of(sym: int) -> str:
+            st_name = symbols[sym][0]
+            return _name(obj, strings.offset + st_name) if st_name else ""
 
     n_symbols = len(symbols)
-    relocations = []  # (target section, offset, type, symbol index, addend)
+    relocations = []  # (target section, its entries: (offset, type, symbol index, addend))
     for sec in sections:
         if sec.type != SHT_RELA or sec.info >= len(sections):
             continue
@@ -181,19 +191,23 @@ def link(obj: bytes, resolve: Callable[[str], int | None]) -> Linked:
             raise Refused(f"{sec.name} names another symbol table")
         if sec.size % _RELA.size:
             raise Refused(f"{sec.name} ends in a partial entry")
-        for r_offset, r_info, addend in _RELA.iter_unpack(
-                obj[sec.offset:sec.offset + sec.size]):
-            typ, sym = r_info & 0xFFFFFFFF, r_info >> 32
-            if typ not in KNOWN:
-                raise Refused(f"relocation type {typ}")
-            if sym >= n_symbols:
-                raise Refused("relocation of a symbol past the table")
-            relocations.append((target, r_offset, typ, sym, addend))
+        rows = [(r_offset, r_info & 0xFFFFFFFF, r_info >> 32, addend) for r_offset, r_info, addend
+                in _RELA.iter_unpack(obj[sec.offset:sec.offset + sec.size])]
+        if not rows:
+            continue
+        types = {row[1] for row in rows}  # checked a section at a time, not an entry
+        if not types <= KNOWN:
+            raise Refused(f"relocation type {min(types - KNOWN)}")
+        if max(row[2] for row in rows) >= n_symbols:
+            raise Refused("relocation of a symbol past the table")
+        relocations.append((target, rows, types))
 
     # the layout: executable sections and stubs, read-only sections and GOT, writable
-    stubs = sorted({sym for _t, _o, typ, sym, _a in relocations
+    stubs = sorted({sym for _t, rows, types in relocations if R_X86_64_PLT32 in types
+                    for _o, typ, sym, _a in rows
                     if typ == R_X86_64_PLT32 and symbols[sym][3] == SHN_UNDEF})
-    got = sorted({sym for _t, _o, typ, sym, _a in relocations if typ in _GOT_TYPES})
+    got = sorted({sym for _t, rows, types in relocations if not types.isdisjoint(_GOT_TYPES)
+                  for _o, typ, sym, _a in rows if typ in _GOT_TYPES})
     where: dict[int, int] = {}  # section index -> offset in the mapping
     size = 0
     groups = []
@@ -216,11 +230,11 @@ def link(obj: bytes, resolve: Callable[[str], int | None]) -> Linked:
             size += 8 * len(got)
         else:
             commons = {}
-            for i, (_n, _info, _other, shndx, value, sz) in enumerate(symbols):
-                if shndx == SHN_COMMON:
-                    size = _align(size, max(value, 1))
-                    commons[i] = size
-                    size += sz
+            for i in [i for i, sym in enumerate(symbols) if sym[3] == SHN_COMMON]:
+                value, sz = symbols[i][4:6]
+                size = _align(size, max(value, 1))
+                commons[i] = size
+                size += sz
         groups.append((kind, start, size))
     size = max(_align(size, _PAGE), _PAGE)
     base = _map(size)
@@ -268,18 +282,22 @@ def link(obj: bytes, resolve: Callable[[str], int | None]) -> Linked:
             stub_of[sym] = base + at
         got_of = {sym: base + got_at + 8 * n for n, sym in enumerate(got)}
         put64 = _U64.pack_into
-        for target, r_offset, typ, sym, addend in relocations:
-            if typ == R_X86_64_NONE:
-                continue
-            s = address[sym]
-            if s is None:
-                raise Refused(f"symbol {name_of(sym)!r} not found")
-            at = where[target.index] + r_offset
-            if r_offset + (8 if typ in (R_X86_64_64, R_X86_64_PC64) else 4) > target.size:
-                raise Refused("relocation past its section")
-            if typ == R_X86_64_64:  # nearly all of numba's (its large code model)
-                put64(image, at, (s + addend) & 0xFFFFFFFFFFFFFFFF)
-            else:
+        for target, rows, _types in relocations:
+            start, end = where[target.index], target.size
+            for r_offset, typ, sym, addend in rows:
+                if typ == R_X86_64_NONE:
+                    continue
+                s = address[sym]
+                if s is None:
+                    raise Refused(f"symbol {name_of(sym)!r} not found")
+                at = start + r_offset
+                if typ == R_X86_64_64:  # nearly all of numba's (its large code model)
+                    if r_offset + 8 > end:
+                        raise Refused("relocation past its section")
+                    put64(image, at, (s + addend) & 0xFFFFFFFFFFFFFFFF)
+                    continue
+                if r_offset + (8 if typ == R_X86_64_PC64 else 4) > end:
+                    raise Refused("relocation past its section")
                 _apply(image, at, base + at, typ, s, addend, stub_of.get(sym),
                        got_of.get(sym))
         ctypes.memmove(base, bytes(image), size)
