@@ -90,9 +90,19 @@ def lazy_numba(module_globals: dict[str, Any]) -> LazyNumba:
     other name is numba's (imported then).
     ImportError where numba is not installed (its importers fall back on that, as on
     ``import numba``), found without importing it."""
-    if "numba" not in sys.modules and importlib.util.find_spec("numba") is None:
+    if "numba" not in sys.modules and not _numba_installed():
         raise ImportError("numba is not installed")
     return LazyNumba(module_globals)
+
+
+_installed: list[bool] = []  # whether numba is installed, looked up once a process
+
+
+def _numba_installed() -> bool:
+    """Whether numba can be imported (asked once, not at each kernel module's import)."""
+    if not _installed:
+        _installed.append(importlib.util.find_spec("numba") is not None)
+    return _installed[0]
 
 
 def compiled_paid() -> bool:
