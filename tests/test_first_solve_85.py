@@ -167,3 +167,39 @@ print(json.dumps({"found": len(calls), "numba": "numba" in sys.modules,
         pytest.skip("numba is not installed")
     assert not got["numba"]  # the kernel modules imported without numba
     assert got["found"] <= 1
+
+
+def test_the_reversed_walks_signature_is_warmed() -> None:
+    """zeroconf 20-4 ``correct_min`` compiled ``compiled_graph.reaching_edges`` in its
+    solve after ``mitld-lp warm`` (wide-84, on 95e98cc: 2.4 s of solve against 0.7): a
+    minimum's Prob1A search walks the reversed edges compiled from 150,000 entries once the
+    loader is set up, and warm did not list the signature that walk calls.  Here the
+    arguments each caller of the compiled walk gives are recorded and their type key
+    looked up in warm's list."""
+    import numpy as np
+    import scipy.sparse as sp
+
+    from mitld_lp.solvers import reach
+    from mitld_lp.util import warm_kernels
+    from mitld_lp.util.kernel_types import type_key
+
+    seen = []
+
+    class Walks:
+        @staticmethod
+        def reaching_edges(*args: object) -> np.ndarray:
+            seen.append(warm_kernels.encode(type_key(args)))
+            return np.zeros(int(args[0]), dtype=bool)
+
+    listed = {key for m, n, key in warm_kernels.signatures()
+              if (m, n) == ("mitld_lp.solvers.compiled_graph", "reaching_edges")}
+    real = reach.compiled_walks
+    reach.compiled_walks = lambda entries: Walks
+    try:
+        seeds = np.array([False, True, False])
+        reach.backward_reachable(3, np.array([0, 2]), np.array([1, 1]), seeds)
+        m = sp.csr_array(np.array([[0.5, 0.5, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]))
+        reach.reaching_through(m, np.array([0, 1, 2, 3]), np.array([True, True, True]), seeds)
+    finally:
+        reach.compiled_walks = real
+    assert seen and {warm_kernels.encode(k) for k in listed} >= set(seen), (seen, listed)

@@ -124,6 +124,9 @@ SIGNATURES: dict[str, dict[str, tuple[str, ...]]] = {
         "end_components_among": (
             "i4/1C i4/1C b1/1C i8/1C i8/1C",
         ),
+        "reaching_edges": (  # reach.backward_reachable's compiled walk (int32 edges)
+            "int i4/1C i4/1C b1/1C",
+        ),
         "state_levels": (
             "i4/1C i4/1C i8/1C b1/2C int",
         ),
