@@ -45,32 +45,29 @@ def _assemble(strtab: bytes, symbols: list[tuple[int, int, int, int]],
     blobs += [symtab, strtab, shstr]
     blobs += [b"".join(struct.pack("<QQq", off, (sym << 32) | typ, add)
                        for off, typ, sym, add in relocs[i]) for i in rela_of]
-    offsets, pos = [], 64
+    out, offsets = bytearray(64), []  # the header written last, over these 64 bytes
     for b in blobs:
-        pos = (pos + 15) // 16 * 16
-        offsets.append(pos)
-        pos += len(b)
-    shoff = (pos + 7) // 8 * 8
-    # name, type, flags, addr, offset, size, link, info, align, entsize
-    heads = [(0,) * 10,
-             (at[".text"], 1, 6, 0, offsets[0], 64, 0, 0, 16, 0),
-             (at[".text.b"], 1, 6, 0, offsets[1], 32, 0, 0, 16, 0),
-             (at[".symtab"], 2, 0, 0, offsets[2], len(symtab), 4, 1, 8, 24),
-             (at[".strtab"], 3, 0, 0, offsets[3], len(strtab), 0, 0, 1, 0),
-             (at[".shstrtab"], 3, 0, 0, offsets[4], len(shstr), 0, 0, 1, 0)]
+        out += bytes(-len(out) % 16)
+        offsets.append(len(out))
+        out += b
+    out += bytes(-len(out) % 8)
+    kinds = {  # sh_type, sh_flags, sh_link, sh_info, sh_addralign, sh_entsize
+             "code": (1, 6, 0, 0, 16, 0), "symtab": (2, 0, 4, 1, 8, 24),
+             "strtab": (3, 0, 0, 0, 1, 0)}
+    plan = [(".text", "code"), (".text.b", "code"), (".symtab", "symtab"),
+            (".strtab", "strtab"), (".shstrtab", "strtab")]
+    table = [bytes(64)]
+    for k, (name, kind) in enumerate(plan):
+        typ, flags, link, info, align, entsize = kinds[kind]
+        table.append(struct.pack("<IIQQQQIIQQ", at[name], typ, flags, 0, offsets[k],
+                                 len(blobs[k]), link, info, align, entsize))
     for k, i in enumerate(rela_of):
-        heads.append((at[names[5 + k]], 4, 0x40, 0, offsets[5 + k], len(blobs[5 + k]), 3, i,
-                      8, 24))
-    header = (b"\x7fELF\x02\x01\x01" + b"\0" * 9
-              + struct.pack("<HHIQQQIHHHHHH", 1, 62, 1, 0, 0, shoff, 0, 64, 0, 0, 64,
-                            len(heads), 5))
-    out = bytearray(shoff + 64 * len(heads))
-    out[:64] = header
-    for off, b in zip(offsets, blobs, strict=True):
-        out[off:off + len(b)] = b
-    for i, h in enumerate(heads):
-        struct.pack_into("<IIQQQQIIQQ", out, shoff + 64 * i, *h)
-    return bytes(out)
+        table.append(struct.pack("<IIQQQQIIQQ", at[names[5 + k]], 4, 0x40, 0, offsets[5 + k],
+                                 len(blobs[5 + k]), 3, i, 8, 24))
+    out[:64] = (b"\x7fELF\x02\x01\x01" + bytes(9)
+                + struct.pack("<HHIQQQIHHHHHH", 1, 62, 1, 0, 0, len(out), 0, 64, 0, 0, 64,
+                              len(table), 5))
+    return bytes(out + b"".join(table))
 
 
 GLOBAL_FUNC, GLOBAL_NOTYPE = 0x12, 0x10
