@@ -250,6 +250,7 @@ def link(obj: bytes, resolve: Callable[[str], int | None]) -> Linked:
             bind, typ = info >> 4, info & 0xF
             if typ in (STT_TLS, STT_GNU_IFUNC):
                 raise Refused(f"symbol {name_of(i)!r} of type {typ}")
+            name = ""  # an undefined symbol's name, read once for both uses
             if shndx == SHN_UNDEF:
                 name = name_of(i)
                 addr = resolve(name) if name else None
@@ -263,7 +264,7 @@ def link(obj: bytes, resolve: Callable[[str], int | None]) -> Linked:
                 addr = base + where[shndx] + value if shndx in where else None
             address.append(addr)
             if addr is not None and st_name and bind != STB_LOCAL and typ != STT_SECTION:
-                name = name_of(i)  # a global's name (the locals are never named)
+                name = name or name_of(i)  # a global's name (the locals are never named)
                 if name:
                     out[name] = addr
         for n, sym in enumerate(got):
