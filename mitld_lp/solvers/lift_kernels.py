@@ -32,20 +32,23 @@ def first_staying_kernel(groups, indptr, indices, data, inside,
     outside ``inside``, else its first choice."""
     out = np.empty(states.shape[0], dtype=np.int64)
     for k in range(states.shape[0]):
-        s = states[k]
-        lo = groups[s]
-        best = lo
-        for c in range(lo, groups[s + 1]):
-            stays = True
-            for e in range(indptr[c], indptr[c + 1]):
-                if data[e] > 0.0 and not inside[indices[e]]:
-                    stays = False
-                    break
-            if stays:
-                best = c
-                break
-        out[k] = best
+        out[k] = _first_stay(groups, indptr, indices, data, inside, states[k])
     return out
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _first_stay(groups, indptr, indices, data, inside, s):  # pragma: no cover - compiled
+    """State ``s``'s first choice with no entry of positive probability outside
+    ``inside``, else its first choice."""
+    for c in range(groups[s], groups[s + 1]):
+        stays = True
+        for e in range(indptr[c], indptr[c + 1]):
+            if data[e] > 0.0 and not inside[indices[e]]:
+                stays = False
+                break
+        if stays:
+            return c
+    return groups[s]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -67,19 +70,10 @@ def lift_states_kernel(groups, indptr, indices, data, zero, search, state_map, c
         if ends[s]:
             policy[s] = -1
             continue
-        lo = groups[s]
-        best = lo
-        if search and zero[s] and groups[s + 1] - lo > 1:
-            for c in range(lo, groups[s + 1]):
-                stays = True
-                for e in range(indptr[c], indptr[c + 1]):
-                    if data[e] > 0.0 and not zero[indices[e]]:
-                        stays = False
-                        break
-                if stays:
-                    best = c
-                    break
-        policy[s] = best
+        if search and zero[s] and groups[s + 1] - groups[s] > 1:
+            policy[s] = _first_stay(groups, indptr, indices, data, zero, s)
+        else:
+            policy[s] = groups[s]
 
 
 def _fixed(a: Any, dtype: Any = None) -> np.ndarray:
