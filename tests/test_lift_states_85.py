@@ -230,3 +230,29 @@ def test_lift_states_kernel_small_case_by_hand() -> None:
         kernel(groups, m.indptr, m.indices, m.data, zero, search, state_map, chosen, ends,
                policy)
         assert policy.tolist() == want
+
+
+@pytest.mark.parametrize("wide", ["indices", "indptr", "state_map"])
+def test_a_wide_index_array_keeps_the_numpy_route(monkeypatch, wide: str) -> None:
+    """The kernel is compiled for int32 index arrays only: an int64 one (the matrix's
+    indices or pointers, or the state map) takes the NumPy route, never a compile in a
+    solve; with all int32 the gate asks the cache."""
+    rng = np.random.default_rng(8599)
+    mdp, goal, _ = _mdp(rng, 1500, forward=True)
+    q = analyse(mdp, goal, sense=Sense.MIN)[0]
+    chosen = np.asarray(q.choice_origin)[np.asarray(q.row_groups)[:-1]]
+    monkeypatch.setattr(quotient.kernel_loader, "compiled_paid", lambda: True)
+    monkeypatch.setattr(quotient, "LIFT_KERNEL_MIN_STATES", 1)
+    monkeypatch.setattr(quotient, "_LIFT_STATES_WARM", [True])
+    assert chosen.dtype == np.int32 and np.asarray(q.state_map).dtype == np.int32
+    assert quotient._lift_states_compiled(mdp, q, chosen)
+    m = sp.csr_array(mdp.matrix, copy=True)
+    if wide == "state_map":
+        q = type(q)(**{**{f: getattr(q, f) for f in q.__dataclass_fields__},
+                       "state_map": np.asarray(q.state_map).astype(np.int64)})
+    else:
+        setattr(m, wide, getattr(m, wide).astype(np.int64))
+        mdp = MDP(matrix=m, row_groups=mdp.row_groups, choice_actions=mdp.choice_actions,
+                  action_names=mdp.action_names, initial=mdp.initial, target=mdp.target,
+                  sink=mdp.sink, truncated=mdp.truncated, states=mdp.states)
+    assert not quotient._lift_states_compiled(mdp, q, chosen)

@@ -267,12 +267,13 @@ def _lift_states_compiled(mdp: MDP, quotient: Quotient, chosen: np.ndarray) -> b
     """Whether :func:`lift_policy` runs as one compiled pass over the states
     (:func:`_lifted_compiled`): no end component collapsed (the caller asks), a product of at
     least :data:`LIFT_KERNEL_MIN_STATES` states, the kernels' load paid and this kernel
-    cached, and the state map, the chosen choices and the matrix's indices int32 (the
-    signature ``warm`` compiles)."""
+    cached, and the state map, the chosen choices and the matrix's index arrays int32
+    (the signature ``warm`` compiles: no compile in a solve)."""
     if mdp.n_states < LIFT_KERNEL_MIN_STATES or not kernel_loader.compiled_paid():
         return False
+    m = mdp.matrix
     if np.asarray(quotient.state_map).dtype != np.int32 or chosen.dtype != np.int32 \
-            or np.asarray(mdp.matrix.indices).dtype != np.int32:
+            or m.indices.dtype != np.int32 or m.indptr.dtype != np.int32:
         return False
     if not _LIFT_STATES_WARM:
         _LIFT_STATES_WARM.append(kernel_loader.module_cached(
