@@ -171,17 +171,24 @@ def _outside(mdp: MDP, quotient: Quotient, policy: np.ndarray) -> None:
             if many.size:
                 many += lo
                 policy[many] = staying_choices(mdp, zero, many)
-    if quotient.sense is Sense.MAX:  # the removed value-1 states: toward the target
-        sure = np.asarray(quotient.qualitative.one) & (quotient.state_map < 0) \
-            & ~quotient.target
-        if sure.any():
-            played = _recorded(quotient, sure)
-            if played is None:
-                played = _searched(mdp, quotient, sure)
-            policy[played.states] = played.choices
-        del sure
+    played = _sure_played(mdp, quotient)
+    if played is not None:
+        policy[played.states] = played.choices
+    del played
     policy[quotient.target] = -1
     policy[absorbing_states(mdp)] = -1
+
+
+def _sure_played(mdp: MDP, quotient: Quotient) -> SureStrategy | None:
+    """A maximum's removed value-1 states and the choices they play, toward the target
+    (:func:`_recorded`'s, else :func:`_searched`'s); None for a minimum or where none."""
+    if quotient.sense is not Sense.MAX:
+        return None
+    sure = np.asarray(quotient.qualitative.one) & (quotient.state_map < 0) & ~quotient.target
+    if not sure.any():
+        return None
+    played = _recorded(quotient, sure)
+    return _searched(mdp, quotient, sure) if played is None else played
 
 
 def _searched(mdp: MDP, quotient: Quotient, sure: np.ndarray) -> SureStrategy:
@@ -256,6 +263,45 @@ def lift_compiled(n_states: int) -> bool:
     return _LIFT_WARM[0]
 
 
+def _lift_states_compiled(mdp: MDP, quotient: Quotient, chosen: np.ndarray) -> bool:
+    """Whether :func:`lift_policy` runs as one compiled pass over the states
+    (:func:`_lifted_compiled`): no end component collapsed (the caller asks), a product of at
+    least :data:`LIFT_KERNEL_MIN_STATES` states, the kernels' load paid and this kernel
+    cached, and the state map, the chosen choices and the matrix's index arrays int32
+    (the signature ``warm`` compiles: no compile in a solve)."""
+    if mdp.n_states < LIFT_KERNEL_MIN_STATES or not kernel_loader.compiled_paid():
+        return False
+    m = mdp.matrix
+    if np.asarray(quotient.state_map).dtype != np.int32 or chosen.dtype != np.int32 \
+            or m.indices.dtype != np.int32 or m.indptr.dtype != np.int32:
+        return False
+    if not _LIFT_STATES_WARM:
+        _LIFT_STATES_WARM.append(kernel_loader.module_cached(
+            "mitld_lp.solvers.lift_kernels", "lift_states_kernel"))
+    return _LIFT_STATES_WARM[0]
+
+
+_LIFT_STATES_WARM: list[bool] = []  # whether the whole lift's kernel is cached, looked up once
+
+
+def _lifted_compiled(mdp: MDP, quotient: Quotient, chosen: np.ndarray) -> np.ndarray:
+    """:func:`lift_policy` where no end component is collapsed, the states in one
+    compiled pass (:func:`~mitld_lp.solvers.lift_kernels.lift_states`: the same
+    integers as :func:`_outside` and the gather, without their passes over every
+    state), then a maximum's removed value-1 states' choices (:func:`_sure_played`)."""
+    from mitld_lp.solvers.lift_kernels import lift_states
+
+    ends = absorbing_states(mdp)
+    ends |= np.asarray(quotient.target)
+    policy = lift_states(np.asarray(mdp.row_groups), mdp.matrix, quotient.prob0,
+                         quotient.sense is Sense.MIN, quotient.state_map, chosen, ends)
+    played = _sure_played(mdp, quotient)
+    if played is not None:  # never a target's or an absorbing state's -1 (as _outside)
+        keep = ~ends[played.states]
+        policy[played.states[keep]] = played.choices[keep]
+    return policy
+
+
 def _recorded(quotient: Quotient, sure: np.ndarray) -> SureStrategy | None:
     """The strategy the analysis recorded for the ``sure`` states from the attractor
     that found them (:func:`mitld_lp.solvers.analysis._attractor_strategy`, kept in
@@ -315,10 +361,12 @@ def lift_policy(mdp: MDP, quotient: Quotient, reduced_choice: np.ndarray) -> np.
       for a minimum, their first choice that stays among them (``Prob0E``: one does,
       and staying avoids the target for ever).
     """
+    chosen = quotient.choice_origin[np.asarray(reduced_choice, dtype=np.int64)]
+    if not quotient.mecs.n_mecs and _lift_states_compiled(mdp, quotient, chosen):
+        return _lifted_compiled(mdp, quotient, chosen)
     policy = np.empty(mdp.n_states, dtype=np.int64)  # int64 as promised
     _outside(mdp, quotient, policy)
 
-    chosen = quotient.choice_origin[np.asarray(reduced_choice, dtype=np.int64)]
     if chosen.size:  # a gather kept where plain (a removed state's -1 reads the last
         # entry and is not kept), a slice of states at a time: not the plain states'
         # indices, their reduced states and choices, three int64 arrays a state, nor one

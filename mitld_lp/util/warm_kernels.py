@@ -187,6 +187,9 @@ SIGNATURES: dict[str, dict[str, tuple[str, ...]]] = {
         "first_staying_kernel": (
             "i8/1C/ro i4/1C/ro i4/1C/ro f8/1C/ro b1/1C/ro i8/1C/ro",
         ),
+        "lift_states_kernel": (
+            "i8/1C/ro i4/1C/ro i4/1C/ro f8/1C/ro b1/1C/ro bool i4/1C/ro i4/1C/ro b1/1C/ro i8/1C",
+        ),
     },
     "mitld_lp.solvers.quotient_kernels": {
         "quotient_entries": (
