@@ -360,6 +360,16 @@ class _Walk:
         return out
 
 
+def _stable_order(lv: np.ndarray) -> np.ndarray:
+    """``np.argsort(lv, kind="stable")``: the one permutation that sorts ``lv`` keeping
+    ties in their order, by NumPy's radix sort on 16-bit keys where the levels fit
+    them (its merge sort on 64-bit ones: QVBS csma 3-4 all_before_max's live states,
+    some 20 ms)."""
+    if lv.size and int(lv.min()) >= 0 and int(lv.max()) < (1 << 16):
+        return np.argsort(lv.astype(np.uint16), kind="stable")
+    return np.argsort(lv, kind="stable")
+
+
 def _downward(st: Rows, live: np.ndarray, lv: np.ndarray, level_of: np.ndarray) -> bool:
     """:attr:`_Walk.downward` of the ``live`` states (their levels ``lv``, ascending)
     without the walk: whether no stored entry of their rows reads a ``live`` state of
@@ -392,6 +402,11 @@ class Repair:
     moved: int = 0
     readers_of: tuple[np.ndarray, np.ndarray] | None = None
     in_mec: np.ndarray | None = None  # ``mec_of >= 0``, made at the first call
+    # the compiled rounds' scratch (-1 a state) and whether ``x`` was found finite: made
+    # at a run's first large level, kept through its others (a move keeps ``x`` finite:
+    # a need past a finite bound, capped at 1 or 0; an end component's extreme)
+    at: np.ndarray | None = None
+    finite: bool | None = None
 
     def together(self, x: np.ndarray, states: np.ndarray) -> np.ndarray:
         """Bring each end component touched by ``states`` to its members' extreme value;
@@ -507,8 +522,14 @@ class Repair:
             return True
         if self.readers_of is None:
             self.readers_of = readers_by_column(self.st)
+        if self.finite is None:
+            self.finite = bool(np.isfinite(x).all())
+        if not self.finite:
+            return None  # (the kernel's refusal, found once)
+        if self.at is None:
+            self.at = np.full(x.shape[0], -1, dtype=np.int64)
         got = compiled_rounds(self.st, self.rnd, x, mine, todo, self.upper,
-                              self.readers_of, moved, ROUNDS)
+                              self.readers_of, moved, ROUNDS, self.at, True)
         if got is None:
             return None
         moves, settled = got
@@ -526,11 +547,12 @@ class Repair:
         (:meth:`_compiled`: the same bounds, moves and verdict).  Where every level is small and
         reads only lower ones, and no state is in an end component, the repair goes
         pass by pass instead (:meth:`_passes`, :data:`PASSES`): the same bounds."""
+        self.finite = None  # (``x`` is this run's: looked at again at its first level)
         live = np.flatnonzero(~self.free)
         lv = self.level_of[live]
         first = int(self.level_of[failing].min())
         live, lv = live[lv >= first], lv[lv >= first]
-        order = np.argsort(lv, kind="stable")
+        order = _stable_order(lv)
         live, lv = live[order], lv[order]
         del order
         at = np.concatenate([[0], np.flatnonzero(np.diff(lv)) + 1, [lv.size]])
@@ -548,17 +570,29 @@ class Repair:
         walk_at = np.concatenate([[0], np.cumsum(np.where(small, sizes, 0))]).tolist()
         moved = np.zeros(x.shape[0], dtype=bool)  # every state moved so far
         fresh = np.zeros(x.shape[0], dtype=bool)  # scratch: those of one round
+        # the states with a row holding a moved state, kept as the levels move them,
+        # where a large level is still to come: its first states to do, not the
+        # readers of every state moved so far searched again at each large level
+        # (QVBS csma 3-4 all_before_max: 35 large levels, each a pass over every
+        # state's flag and the readers of all moved so far)
+        large = np.flatnonzero(~small)
+        last_large = int(large[-1]) if large.size else -1
+        reads = np.zeros(x.shape[0], dtype=bool) if last_large > 0 else None
         bounds = at.tolist()
         for k, is_small in enumerate(small.tolist()):
             mine = live[bounds[k]:bounds[k + 1]]
             a, z = walk_at[k], walk_at[k + 1]
             todo = failing[mine] | (walk.reading(moved, a, z) if is_small else
+                                    reads[mine] if reads is not None else
                                     self.readers(np.flatnonzero(moved), mine, fresh))
             if not is_small:
+                before = moved[mine] if reads is not None and k < last_large else None
                 done = self._compiled(x, mine, todo, moved)
                 if done is not None:  # the same rounds in one call
                     if not done:
                         return False
+                    if before is not None:  # (the kernel moves the level's states)
+                        self._reading(reads, mine[moved[mine] & ~before])
                     continue
             for r in range(ROUNDS):
                 if not todo.any():
@@ -575,6 +609,8 @@ class Repair:
                 self.moved += int(changed.size)
                 now = self.together(x, changed)
                 moved[now] = True
+                if reads is not None and k < last_large:
+                    self._reading(reads, now)
                 # within the level (its cycles): the states reading those just moved
                 if is_small:
                     if not walk.inward[a] and r + 1 < ROUNDS:
@@ -587,3 +623,9 @@ class Repair:
             else:
                 return False
         return True
+
+    def _reading(self, reads: np.ndarray, moved: np.ndarray) -> None:
+        """Flag in ``reads`` the state of each row holding a ``moved`` state (the
+        :meth:`readers` of those states, kept across the levels)."""
+        if moved.size:
+            reads[self._read_by(moved)] = True
