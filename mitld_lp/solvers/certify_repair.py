@@ -14,12 +14,13 @@ import scipy.sparse as sp
 
 from mitld_lp.solvers.certify_chain import RowModel, support_layers
 from mitld_lp.solvers.certify_compiled import compiled_needs, compiled_rounds
+from mitld_lp.solvers.certify_repair_index import readers_by_column, stable_order, state_groups
 from mitld_lp.solvers.rounding import Rounding, above, below
 from mitld_lp.solvers.rows import gather_ranges, row_entries
 from mitld_lp.util.sparsetools import sparsetools as _st
 
-__all__ = ["CLOSED_SLICE", "PASSES", "ROUNDS", "SPARSE_LEVEL", "Rows", "closed_at_zero",
-           "readers_by_column", "repair_levels"]
+__all__ = ["CLOSED_SLICE", "KEEP_READS", "PASSES", "ROUNDS", "SPARSE_LEVEL", "Rows",
+           "closed_at_zero", "readers_by_column", "repair_levels"]
 
 
 PASSES = True
@@ -27,6 +28,12 @@ PASSES = True
 states that can move (:meth:`Repair._passes`) rather than level by level: the same
 bounds (QVBS ``zeroconf_dl`` 1000-1-30: 14 passes for its 775 levels, the repair
 0.060 -> 0.030 s); False walks every level (kept for the tests that compare the two)."""
+
+KEEP_READS = True
+"""Whether a repair with large levels keeps the readers of the states it moved as flags,
+level after level (:meth:`Repair.run`), rather than searching the readers of every
+state moved so far again at each large level: the same states to do, so the same
+bounds (False: the search, kept for the tests that compare the two)."""
 
 ROUNDS = 64
 """Repair rounds on one level of non-trivial components before giving up."""
@@ -116,7 +123,7 @@ def repair_levels(st: Rows, level_of: np.ndarray, x: np.ndarray, free: np.ndarra
     held = free | (unknown & still)
     if not bool(np.any(unknown & ~held)):
         return level_of, held
-    comp, level = support_layers(RowModel(st.matrix, _state_groups(st), 0))
+    comp, level = support_layers(RowModel(st.matrix, state_groups(st), 0))
     return np.asarray(level)[np.asarray(comp)], free
 
 
@@ -133,7 +140,7 @@ def closed_at_zero(st: Rows, zero: np.ndarray, x: np.ndarray) -> bool:
     # a slice of states at a time (:data:`CLOSED_SLICE`): the whole set's entries
     # gathered at once, an int64 index an entry twice over, were the certificate's
     # traced peak on ``bus_scaled`` n64 d3 (7 bytes a transition); the same test
-    first = _state_groups(st)
+    first = state_groups(st)
     m = st.matrix
     ptr = m.indptr[first]
     del first
@@ -142,46 +149,6 @@ def closed_at_zero(st: Rows, zero: np.ndarray, x: np.ndarray) -> bool:
         if not bool(np.all(zero[m.indices[gather_ranges(ptr[part], ptr[part + 1])]])):
             return False
     return True
-
-
-def _state_groups(st: Rows) -> np.ndarray:
-    """Each state's first row of ``st.matrix`` (its choices' rows, nature's included)."""
-    return st.groups if st.nature is None else np.asarray(st.nature)[st.groups]
-
-
-def readers_by_column(st: Rows) -> tuple[np.ndarray, np.ndarray]:
-    """The matrix's pattern by column as each entry's state: ``(col_ptr, col_state)``,
-    the states of the rows holding column ``j`` at ``col_state[col_ptr[j]:col_ptr[j +
-    1]]`` (with repeats; rows ascending), what :meth:`Repair._read_by` and
-    :func:`~mitld_lp.solvers.certify._touched` read.  By SciPy's compiled CSR-to-CSC
-    transpose with no values carried (one byte an entry, not a boolean matrix and its
-    transposed copy), the rows mapped to their states at once: one index an entry
-    kept, not the rows by column and each row's state beside them (QVBS zeroconf
-    1000-4's repair, at the certificate's traced peak)."""
-    m = st.matrix
-    n_rows, n = m.shape
-    if _st is None:  # pragma: no cover - a SciPy without it: SciPy's own transpose
-        by_column = sp.csc_array(sp.csr_array(
-            (np.ones(m.nnz, dtype=bool), m.indices, m.indptr), shape=m.shape))
-        return by_column.indptr, st.row_state()[by_column.indices]
-    index = np.int32 if max(m.nnz, n_rows, n) < np.iinfo(np.int32).max else np.int64
-    col_ptr = np.empty(n + 1, dtype=index)
-    col_rows = np.empty(m.nnz, dtype=index)
-    first = _state_groups(st)
-    if int(first[0]) == 0 and int(first[-1]) == n_rows:
-        # a state's rows are consecutive, so its entries one range: the transpose of
-        # the states' ranges gives each entry's state directly, in the same order (the
-        # states ascending, a state's entries in the rows' order), with no row-to-state
-        # map of every row and no gather of it at every entry
-        _st.csr_tocsc(st.n_states, n, m.indptr[first].astype(index, copy=False),
-                      m.indices.astype(index, copy=False), np.zeros(m.nnz, dtype=np.int8),
-                      col_ptr, col_rows, np.empty(m.nnz, dtype=np.int8))
-        return col_ptr, col_rows
-    _st.csr_tocsc(n_rows, n, m.indptr.astype(index, copy=False),
-                  m.indices.astype(index, copy=False), np.zeros(m.nnz, dtype=np.int8),
-                  col_ptr, col_rows, np.empty(m.nnz, dtype=np.int8))
-    col_state = st.row_state()[col_rows]  # (each row's state made after the transpose)
-    return col_ptr, col_state
 
 
 def _needed(st: Rows, rnd: Rounding, x: np.ndarray, states: np.ndarray,
@@ -358,16 +325,6 @@ class _Walk:
         out = np.zeros(z - a, dtype=bool)
         out[hit - a] = True
         return out
-
-
-def _stable_order(lv: np.ndarray) -> np.ndarray:
-    """``np.argsort(lv, kind="stable")``: the one permutation that sorts ``lv`` keeping
-    ties in their order, by NumPy's radix sort on 16-bit keys where the levels fit
-    them (its merge sort on 64-bit ones: QVBS csma 3-4 all_before_max's live states,
-    some 20 ms)."""
-    if lv.size and int(lv.min()) >= 0 and int(lv.max()) < (1 << 16):
-        return np.argsort(lv.astype(np.uint16), kind="stable")
-    return np.argsort(lv, kind="stable")
 
 
 def _downward(st: Rows, live: np.ndarray, lv: np.ndarray, level_of: np.ndarray) -> bool:
@@ -552,7 +509,7 @@ class Repair:
         lv = self.level_of[live]
         first = int(self.level_of[failing].min())
         live, lv = live[lv >= first], lv[lv >= first]
-        order = _stable_order(lv)
+        order = stable_order(lv)
         live, lv = live[order], lv[order]
         del order
         at = np.concatenate([[0], np.flatnonzero(np.diff(lv)) + 1, [lv.size]])
@@ -577,7 +534,8 @@ class Repair:
         # state's flag and the readers of all moved so far)
         large = np.flatnonzero(~small)
         last_large = int(large[-1]) if large.size else -1
-        reads = np.zeros(x.shape[0], dtype=bool) if last_large > 0 else None
+        reads = (np.zeros(x.shape[0], dtype=bool) if KEEP_READS and last_large > 0
+                 else None)
         bounds = at.tolist()
         for k, is_small in enumerate(small.tolist()):
             mine = live[bounds[k]:bounds[k + 1]]
