@@ -47,17 +47,21 @@ def spied(monkeypatch):
     return kept
 
 
+def _product_rows(mdp) -> tuple[C.Rows, object]:
+    """``mdp``'s rows as the checks read them and their rounding, the indices in int32
+    as a product's are (the kernel's one cached signature)."""
+    m = sp.csr_array(mdp.matrix)
+    st = C.Rows(sp.csr_array((m.data, m.indices.astype(np.int32),
+                              m.indptr.astype(np.int32)), shape=m.shape),
+                np.asarray(mdp.row_groups, dtype=np.int64))
+    return st, rounding(st.matrix)
+
+
 def _repair(mdp, x0, free, upper, *, keep: bool, compiled: bool, sparse: int,
             monkeypatch):
-    """The repair of ``x0`` by one route: ``(closed, x, moves, scratch)``; the matrix's
-    indices in int32 as a product's are (the kernel's one cached signature)."""
-    m = sp.csr_array(mdp.matrix)
-    m = sp.csr_array((m.data, m.indices.astype(np.int32), m.indptr.astype(np.int32)),
-                     shape=m.shape)
-    st = C.Rows(m, np.asarray(mdp.row_groups, dtype=np.int64))
-    rnd = rounding(st.matrix)
+    """The repair of ``x0`` by one route: ``(closed, x, moves, scratch)``."""
+    st, rnd = _product_rows(mdp)
     comp, level = support_layers(mdp)
-    level_of = np.asarray(level)[np.asarray(comp)]
     x = x0.copy()
     failing = C._fails(st, rnd, x, free, upper)
     with monkeypatch.context() as mp:
@@ -65,7 +69,7 @@ def _repair(mdp, x0, free, upper, *, keep: bool, compiled: bool, sparse: int,
         mp.setattr(R, "SPARSE_LEVEL", sparse)
         if not compiled:
             mp.setattr(R, "compiled_rounds", lambda *a: None)
-        rep = R.Repair(st, rnd, free, level_of, None, upper)
+        rep = R.Repair(st, rnd, free, np.asarray(level)[np.asarray(comp)], None, upper)
         ok = rep.run(x, failing)
     return ok, x, rep.moved, rep.at
 
@@ -163,11 +167,7 @@ def test_the_scratch_is_read_as_a_fresh_map_would_be(hot) -> None:
     after level, move what they move with a map made a call; a scratch of another
     kind is refused by name."""
     mdp = random_mdp(200, seed=3, locality=5, self_loop_fraction=0.3, max_choices=3)
-    m = sp.csr_array(mdp.matrix)
-    m = sp.csr_array((m.data, m.indices.astype(np.int32), m.indptr.astype(np.int32)),
-                     shape=m.shape)
-    st = C.Rows(m, np.asarray(mdp.row_groups, dtype=np.int64))
-    rnd = rounding(st.matrix)
+    st, rnd = _product_rows(mdp)
     readers = R.readers_by_column(st)
     x0, free = _start(mdp, 3, True)
     groups = np.asarray(mdp.row_groups)
