@@ -335,7 +335,8 @@ def rounds_cached() -> bool:
 
 def compiled_rounds(st: Any, rnd: Rounding, x: np.ndarray, mine: np.ndarray,
                     todo: np.ndarray, upper: bool, readers: tuple[np.ndarray, np.ndarray],
-                    moved: np.ndarray, rounds: int) -> tuple[int, bool] | None:
+                    moved: np.ndarray, rounds: int, at: np.ndarray | None = None,
+                    finite: bool = False) -> tuple[int, bool] | None:
     """The repair's rounds on the level ``mine`` from the states to do ``todo`` (a flag
     a state of ``mine``), in one compiled call
     (:func:`~mitld_lp.solvers.certify_repair_kernels.level_rounds`: the rounds of
@@ -344,7 +345,12 @@ def compiled_rounds(st: Any, rnd: Rounding, x: np.ndarray, mine: np.ndarray,
     count): ``(moves, settled)``; None where the NumPy rounds run instead: the kernel's
     load not paid or its cache file not there, arrays of other kinds than the kernel
     takes, a value of ``x`` not finite, or a state of ``mine`` without a choice or a
-    choice without a row (:func:`compiled_needs`' refusals)."""
+    choice without a row (:func:`compiled_needs`' refusals).  ``at``: a scratch int64
+    a state of the model, -1 everywhere, left so (the kernel's map of the level's
+    states, not made a call: a repair's many large levels each wrote one of the
+    model's size, QVBS csma 3-4 all_before_max's 1,458,849 states 35 times); None:
+    made here.  ``finite``: the caller knows ``x`` finite (the repair's moves keep it
+    so), not checked again a call."""
     m = st.matrix
     col_ptr, col_state = readers
     if (not kernel_loader.compiled_paid() or not rounds_cached()
@@ -360,8 +366,12 @@ def compiled_rounds(st: Any, rnd: Rounding, x: np.ndarray, mine: np.ndarray,
     if not bool(np.all(groups[mine + 1] > groups[mine])) or (
             st.nature is not None and not bool(np.all(np.diff(st.nature) > 0))):
         return None
-    if not bool(np.isfinite(x).all()):
+    if not finite and not bool(np.isfinite(x).all()):
         return None
+    if at is None:
+        at = np.full(x.shape[0], -1, dtype=np.int64)
+    elif at.dtype != np.int64 or at.shape != x.shape or not at.flags.c_contiguous:
+        raise ValueError("compiled_rounds: at must be an int64 scratch of a value a state")
     try:
         from mitld_lp.solvers.certify_repair_kernels import level_rounds
     except ImportError:  # pragma: no cover - numba is a dependency of the solvers
@@ -378,7 +388,7 @@ def compiled_rounds(st: Any, rnd: Rounding, x: np.ndarray, mine: np.ndarray,
                  *map(_read_only, (rnd.count, rnd.slack_of,
                                    rnd.high_of if upper else rnd.low_of)),
                  bool(upper), *map(_read_only, (col_ptr, col_state)), int(rounds), moved,
-                 out)
+                 out, at)
     return int(out[0]), bool(out[1])
 
 

@@ -14,12 +14,13 @@ import scipy.sparse as sp
 
 from mitld_lp.solvers.certify_chain import RowModel, support_layers
 from mitld_lp.solvers.certify_compiled import compiled_needs, compiled_rounds
+from mitld_lp.solvers.certify_repair_index import readers_by_column, stable_order, state_groups
 from mitld_lp.solvers.rounding import Rounding, above, below
 from mitld_lp.solvers.rows import gather_ranges, row_entries
 from mitld_lp.util.sparsetools import sparsetools as _st
 
-__all__ = ["CLOSED_SLICE", "PASSES", "ROUNDS", "SPARSE_LEVEL", "Rows", "closed_at_zero",
-           "readers_by_column", "repair_levels"]
+__all__ = ["CLOSED_SLICE", "KEEP_READS", "PASSES", "ROUNDS", "SPARSE_LEVEL", "Rows",
+           "closed_at_zero", "readers_by_column", "repair_levels"]
 
 
 PASSES = True
@@ -27,6 +28,12 @@ PASSES = True
 states that can move (:meth:`Repair._passes`) rather than level by level: the same
 bounds (QVBS ``zeroconf_dl`` 1000-1-30: 14 passes for its 775 levels, the repair
 0.060 -> 0.030 s); False walks every level (kept for the tests that compare the two)."""
+
+KEEP_READS = True
+"""Whether a repair with large levels keeps the readers of the states it moved as flags,
+level after level (:meth:`Repair.run`), rather than searching the readers of every
+state moved so far again at each large level: the same states to do, so the same
+bounds (False: the search, kept for the tests that compare the two)."""
 
 ROUNDS = 64
 """Repair rounds on one level of non-trivial components before giving up."""
@@ -116,7 +123,7 @@ def repair_levels(st: Rows, level_of: np.ndarray, x: np.ndarray, free: np.ndarra
     held = free | (unknown & still)
     if not bool(np.any(unknown & ~held)):
         return level_of, held
-    comp, level = support_layers(RowModel(st.matrix, _state_groups(st), 0))
+    comp, level = support_layers(RowModel(st.matrix, state_groups(st), 0))
     return np.asarray(level)[np.asarray(comp)], free
 
 
@@ -133,7 +140,7 @@ def closed_at_zero(st: Rows, zero: np.ndarray, x: np.ndarray) -> bool:
     # a slice of states at a time (:data:`CLOSED_SLICE`): the whole set's entries
     # gathered at once, an int64 index an entry twice over, were the certificate's
     # traced peak on ``bus_scaled`` n64 d3 (7 bytes a transition); the same test
-    first = _state_groups(st)
+    first = state_groups(st)
     m = st.matrix
     ptr = m.indptr[first]
     del first
@@ -142,46 +149,6 @@ def closed_at_zero(st: Rows, zero: np.ndarray, x: np.ndarray) -> bool:
         if not bool(np.all(zero[m.indices[gather_ranges(ptr[part], ptr[part + 1])]])):
             return False
     return True
-
-
-def _state_groups(st: Rows) -> np.ndarray:
-    """Each state's first row of ``st.matrix`` (its choices' rows, nature's included)."""
-    return st.groups if st.nature is None else np.asarray(st.nature)[st.groups]
-
-
-def readers_by_column(st: Rows) -> tuple[np.ndarray, np.ndarray]:
-    """The matrix's pattern by column as each entry's state: ``(col_ptr, col_state)``,
-    the states of the rows holding column ``j`` at ``col_state[col_ptr[j]:col_ptr[j +
-    1]]`` (with repeats; rows ascending), what :meth:`Repair._read_by` and
-    :func:`~mitld_lp.solvers.certify._touched` read.  By SciPy's compiled CSR-to-CSC
-    transpose with no values carried (one byte an entry, not a boolean matrix and its
-    transposed copy), the rows mapped to their states at once: one index an entry
-    kept, not the rows by column and each row's state beside them (QVBS zeroconf
-    1000-4's repair, at the certificate's traced peak)."""
-    m = st.matrix
-    n_rows, n = m.shape
-    if _st is None:  # pragma: no cover - a SciPy without it: SciPy's own transpose
-        by_column = sp.csc_array(sp.csr_array(
-            (np.ones(m.nnz, dtype=bool), m.indices, m.indptr), shape=m.shape))
-        return by_column.indptr, st.row_state()[by_column.indices]
-    index = np.int32 if max(m.nnz, n_rows, n) < np.iinfo(np.int32).max else np.int64
-    col_ptr = np.empty(n + 1, dtype=index)
-    col_rows = np.empty(m.nnz, dtype=index)
-    first = _state_groups(st)
-    if int(first[0]) == 0 and int(first[-1]) == n_rows:
-        # a state's rows are consecutive, so its entries one range: the transpose of
-        # the states' ranges gives each entry's state directly, in the same order (the
-        # states ascending, a state's entries in the rows' order), with no row-to-state
-        # map of every row and no gather of it at every entry
-        _st.csr_tocsc(st.n_states, n, m.indptr[first].astype(index, copy=False),
-                      m.indices.astype(index, copy=False), np.zeros(m.nnz, dtype=np.int8),
-                      col_ptr, col_rows, np.empty(m.nnz, dtype=np.int8))
-        return col_ptr, col_rows
-    _st.csr_tocsc(n_rows, n, m.indptr.astype(index, copy=False),
-                  m.indices.astype(index, copy=False), np.zeros(m.nnz, dtype=np.int8),
-                  col_ptr, col_rows, np.empty(m.nnz, dtype=np.int8))
-    col_state = st.row_state()[col_rows]  # (each row's state made after the transpose)
-    return col_ptr, col_state
 
 
 def _needed(st: Rows, rnd: Rounding, x: np.ndarray, states: np.ndarray,
@@ -392,6 +359,11 @@ class Repair:
     moved: int = 0
     readers_of: tuple[np.ndarray, np.ndarray] | None = None
     in_mec: np.ndarray | None = None  # ``mec_of >= 0``, made at the first call
+    # the compiled rounds' scratch (-1 a state) and whether ``x`` was found finite: made
+    # at a run's first large level, kept through its others (a move keeps ``x`` finite:
+    # a need past a finite bound, capped at 1 or 0; an end component's extreme)
+    at: np.ndarray | None = None
+    finite: bool | None = None
 
     def together(self, x: np.ndarray, states: np.ndarray) -> np.ndarray:
         """Bring each end component touched by ``states`` to its members' extreme value;
@@ -507,8 +479,14 @@ class Repair:
             return True
         if self.readers_of is None:
             self.readers_of = readers_by_column(self.st)
+        if self.finite is None:
+            self.finite = bool(np.isfinite(x).all())
+        if not self.finite:
+            return None  # (the kernel's refusal, found once)
+        if self.at is None:
+            self.at = np.full(x.shape[0], -1, dtype=np.int64)
         got = compiled_rounds(self.st, self.rnd, x, mine, todo, self.upper,
-                              self.readers_of, moved, ROUNDS)
+                              self.readers_of, moved, ROUNDS, self.at, True)
         if got is None:
             return None
         moves, settled = got
@@ -526,11 +504,12 @@ class Repair:
         (:meth:`_compiled`: the same bounds, moves and verdict).  Where every level is small and
         reads only lower ones, and no state is in an end component, the repair goes
         pass by pass instead (:meth:`_passes`, :data:`PASSES`): the same bounds."""
+        self.finite = None  # (``x`` is this run's: looked at again at its first level)
         live = np.flatnonzero(~self.free)
         lv = self.level_of[live]
         first = int(self.level_of[failing].min())
         live, lv = live[lv >= first], lv[lv >= first]
-        order = np.argsort(lv, kind="stable")
+        order = stable_order(lv)
         live, lv = live[order], lv[order]
         del order
         at = np.concatenate([[0], np.flatnonzero(np.diff(lv)) + 1, [lv.size]])
@@ -548,17 +527,30 @@ class Repair:
         walk_at = np.concatenate([[0], np.cumsum(np.where(small, sizes, 0))]).tolist()
         moved = np.zeros(x.shape[0], dtype=bool)  # every state moved so far
         fresh = np.zeros(x.shape[0], dtype=bool)  # scratch: those of one round
+        # the states with a row holding a moved state, kept as the levels move them,
+        # where a large level is still to come: its first states to do, not the
+        # readers of every state moved so far searched again at each large level
+        # (QVBS csma 3-4 all_before_max: 35 large levels, each a pass over every
+        # state's flag and the readers of all moved so far)
+        large = np.flatnonzero(~small)
+        last_large = int(large[-1]) if large.size else -1
+        reads = (np.zeros(x.shape[0], dtype=bool) if KEEP_READS and last_large > 0
+                 else None)
         bounds = at.tolist()
         for k, is_small in enumerate(small.tolist()):
             mine = live[bounds[k]:bounds[k + 1]]
             a, z = walk_at[k], walk_at[k + 1]
             todo = failing[mine] | (walk.reading(moved, a, z) if is_small else
+                                    reads[mine] if reads is not None else
                                     self.readers(np.flatnonzero(moved), mine, fresh))
             if not is_small:
+                before = moved[mine] if reads is not None and k < last_large else None
                 done = self._compiled(x, mine, todo, moved)
                 if done is not None:  # the same rounds in one call
                     if not done:
                         return False
+                    if before is not None:  # (the kernel moves the level's states)
+                        self._reading(reads, mine[moved[mine] & ~before])
                     continue
             for r in range(ROUNDS):
                 if not todo.any():
@@ -575,6 +567,8 @@ class Repair:
                 self.moved += int(changed.size)
                 now = self.together(x, changed)
                 moved[now] = True
+                if reads is not None and k < last_large:
+                    self._reading(reads, now)
                 # within the level (its cycles): the states reading those just moved
                 if is_small:
                     if not walk.inward[a] and r + 1 < ROUNDS:
@@ -587,3 +581,9 @@ class Repair:
             else:
                 return False
         return True
+
+    def _reading(self, reads: np.ndarray, moved: np.ndarray) -> None:
+        """Flag in ``reads`` the state of each row holding a ``moved`` state (the
+        :meth:`readers` of those states, kept across the levels)."""
+        if moved.size:
+            reads[self._read_by(moved)] = True

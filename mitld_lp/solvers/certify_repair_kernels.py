@@ -192,7 +192,7 @@ def state_needs(states, groups, nature, indptr, indices, data, x, count, slack_o
 @numba.njit(cache=True, nogil=True)
 def level_rounds(mine, todo, groups, nature, indptr, indices, data, x, count, slack_of,
                  factor_of, upper, col_ptr, col_state, rounds, moved,
-                 out):  # pragma: no cover - compiled
+                 out, at):  # pragma: no cover - compiled
     """The repair's rounds on the level's states ``mine`` (each with a choice, each
     choice with a row), from the states to do ``todo`` (a flag per state of ``mine``,
     overwritten), at most ``rounds`` rounds: per round the needs of those to do from
@@ -202,11 +202,11 @@ def level_rounds(mine, todo, groups, nature, indptr, indices, data, x, count, sl
     moves made (a state once a round it moves in), ``out[1]``: 1 where the level
     settled (a round with none to do or none moved), 0 where it still moved after
     ``rounds`` rounds.  ``groups``: each state's first choice; ``nature``: each
-    choice's first row (empty: a row a choice)."""
-    n = x.shape[0]
+    choice's first row (empty: a row a choice).  ``at``: a scratch int64 a state,
+    -1 everywhere on entry and so again on return (each state's place in ``mine``
+    while the rounds run): not a map of the model's size made a call."""
     m = mine.shape[0]
     has_nature = nature.shape[0] > 0
-    at = np.full(n, -1, dtype=np.int64)  # each state's place in ``mine``, else -1
     for i in range(m):
         at[mine[i]] = i
     doing = np.empty(m, dtype=np.int64)
@@ -251,6 +251,8 @@ def level_rounds(mine, todo, groups, nature, indptr, indices, data, x, count, sl
                 p = at[col_state[e]]
                 if p >= 0:
                     todo[p] = True
+    for i in range(m):
+        at[mine[i]] = -1
     out[0] = moves
     out[1] = settled
 

@@ -105,7 +105,7 @@ SIGNATURES: dict[str, dict[str, tuple[str, ...]]] = {
     "mitld_lp.solvers.certify_repair_kernels": {
         "level_rounds": (
             "i8/1C/ro b1/1C i8/1C/ro i8/1C/ro i4/1C/ro i4/1C/ro f8/1C/ro f8/1C i4/1C/ro f8/1C/ro "
-            "f8/1C/ro bool i4/1C/ro i4/1C/ro int b1/1C i8/1C",
+            "f8/1C/ro bool i4/1C/ro i4/1C/ro int b1/1C i8/1C i8/1C",
         ),
         "state_needs": (
             "i8/1C i8/1C i8/1C i4/1C i4/1C f8/1C f8/1C i4/1C/ro f8/1C/ro f8/1C/ro bool f8/1C bool",
