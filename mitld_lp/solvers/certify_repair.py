@@ -10,11 +10,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
 from mitld_lp.solvers.certify_chain import RowModel, support_layers
 from mitld_lp.solvers.certify_compiled import compiled_needs, compiled_rounds
-from mitld_lp.solvers.certify_repair_index import readers_by_column, stable_order, state_groups
+from mitld_lp.solvers.certify_repair_index import (  # noqa: F401 - Rows re-exported
+    Rows,
+    readers_by_column,
+    stable_order,
+    state_groups,
+)
 from mitld_lp.solvers.rounding import Rounding, above, below
 from mitld_lp.solvers.rows import gather_ranges, row_entries
 from mitld_lp.util.sparsetools import sparsetools as _st
@@ -47,60 +51,6 @@ every state of the level (:class:`_Walk`)."""
 CLOSED_SLICE = 4096
 """The states of ``zero`` whose rows :func:`closed_at_zero` reads at a time (their
 entries' index, column and membership arrays are its temporaries)."""
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class Rows:
-    """What the Bellman checks read: the ``matrix``'s rows (distributions), grouped into
-    choices by ``nature`` (choice ``c``'s rows are ``nature[c]:nature[c+1]``, nature
-    picks one, as in a robust game; ``None``: one row per choice) and the choices into
-    states by ``groups``."""
-
-    matrix: sp.csr_array
-    groups: np.ndarray
-    nature: np.ndarray | None = None
-
-    @property
-    def n_states(self) -> int:
-        return int(self.groups.shape[0] - 1)
-
-    def row_state(self) -> np.ndarray:
-        """The state of each row: 4 bytes a row where the states' count fits."""
-        index = np.int32 if self.n_states < np.iinfo(np.int32).max else np.int64
-        cs = np.repeat(np.arange(self.n_states, dtype=index), np.diff(self.groups))
-        return cs if self.nature is None else np.repeat(cs, np.diff(self.nature))
-
-    def row_states(self, a: int, z: int) -> np.ndarray:
-        """``row_state()[a:z]`` (``a < z``), made from the groups around those rows
-        alone: not an index a row of the whole matrix held through a check."""
-        choices = _owners(self.nature, a, z) if self.nature is not None else None
-        if choices is None:
-            return _owners(self.groups, a, z)
-        first, last = int(choices[0]), int(choices[-1])
-        return _owners(self.groups, first, last + 1)[choices - first]
-
-    def rows_of(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray | None,
-                                                    np.ndarray]:
-        """The rows of ``states``' choices, where each choice's rows start (``None``
-        without nature) and where each state's choices start, both within the rows."""
-        choices = gather_ranges(self.groups[states], self.groups[states + 1])
-        per_state = self.groups[states + 1] - self.groups[states]
-        state_starts = np.concatenate([[0], np.cumsum(per_state)[:-1]])
-        if self.nature is None:
-            return choices, None, state_starts
-        rows = gather_ranges(self.nature[choices], self.nature[choices + 1])
-        per_choice = self.nature[choices + 1] - self.nature[choices]
-        return rows, np.concatenate([[0], np.cumsum(per_choice)[:-1]]), state_starts
-
-
-def _owners(starts: np.ndarray, a: int, z: int) -> np.ndarray:
-    """The owner of each of the items ``a:z`` (``a < z``), owner ``k``'s items being
-    ``starts[k]:starts[k + 1]``: the last owner starting at or before each, as
-    ``np.repeat(arange(len(starts) - 1), np.diff(starts))[a:z]``."""
-    lo = int(np.searchsorted(starts, a, side="right")) - 1
-    hi = int(np.searchsorted(starts, z - 1, side="right")) - 1
-    edges = np.clip(starts[lo:hi + 2], a, z)
-    return np.repeat(np.arange(lo, hi + 1, dtype=np.int64), np.diff(edges))
 
 
 def repair_levels(st: Rows, level_of: np.ndarray, x: np.ndarray, free: np.ndarray,
