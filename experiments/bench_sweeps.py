@@ -113,7 +113,7 @@ def _model(inst: Instance) -> Any:
 
 def preload() -> None:
     """Import the modules the solve stage imports on first use (the analysis, the
-    solvers, the acceptance), so that ``solve_cpu`` is the solve and not a one-time
+    solvers, the certificate, the acceptance), so that ``solve_cpu`` is the solve and not a one-time
     library load (0.1-0.3 s): Storm's check is timed after stormpy is loaded too.  The
     process figures include it; numba, loaded only for a large product, stays inside.
     SciPy's csgraph is loaded by the solve of a product past the small-graph walks
@@ -124,6 +124,7 @@ def preload() -> None:
     they are not imported here."""
     import mitld_lp.routes.acceptance
     import mitld_lp.solvers.analysis
+    import mitld_lp.solvers.certify
     import mitld_lp.solvers.iteration
     import mitld_lp.solvers.lp  # noqa: F401
     from mitld_lp.util import traversal
