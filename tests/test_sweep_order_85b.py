@@ -24,7 +24,7 @@ from mitld_lp.testing import random_mdp
 @pytest.fixture
 def as_python(monkeypatch):
     """The order's kernels as plain Python (numba never called)."""
-    for name in order_kernels.KERNELS:
+    for name in (*order_kernels.KERNELS, "reach_order"):
         monkeypatch.setattr(order_kernels, name, getattr(order_kernels, name).py_func)
 
 

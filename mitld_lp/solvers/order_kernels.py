@@ -27,7 +27,9 @@ numba = kernel_loader.lazy_numba(globals())
 __all__ = ["KERNELS", "reach_order", "renumber", "renumber_kernel", "value_order_kernel",
            "value_order_of"]
 
-KERNELS = ("value_order_kernel", "renumber_kernel", "reach_order")
+KERNELS = ("value_order_kernel", "renumber_kernel")
+"""The kernels a solve calls (each a cache file of its own: :func:`reach_order` is
+compiled into its caller, and has none)."""
 
 
 @numba.njit(cache=True, nogil=True)
