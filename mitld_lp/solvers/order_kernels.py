@@ -38,8 +38,8 @@ def reach_order(back_ptr, back_idx, seeds, seen, order, k):  # pragma: no cover
     inside the block reaches one of ``seeds`` (a seed at distance 0), by that distance
     and at one distance the last state first; mark them seen; the new ``k``."""
     n = seen.shape[0]
-    dist = np.full(n, -1, dtype=np.int64)
-    queue = np.empty(n, dtype=np.int64)
+    dist = np.full(n, -1, dtype=np.int32)  # a block's states fit 31 bits: half the
+    queue = np.empty(n, dtype=np.int32)  # memory traffic of int64 on a random walk
     tail = 0
     for s in seeds:
         if dist[s] < 0:
@@ -100,7 +100,7 @@ def value_order_kernel(groups, indptr, indices, to_target, out_ptr):  # pragma: 
                 count[indices[e] + 1] += 1
     for t in range(n):
         count[t + 1] += count[t]
-    back_idx = np.empty(count[n], dtype=np.int64)
+    back_idx = np.empty(count[n], dtype=np.int32)
     fill = count[:n].copy()
     for s in range(n):
         for e in range(indptr[groups[s]], indptr[groups[s + 1]]):
