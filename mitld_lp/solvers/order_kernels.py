@@ -124,7 +124,8 @@ def value_order_kernel(groups, indptr, indices, to_target, out_ptr):  # pragma: 
 @numba.njit(cache=True, nogil=True)
 def renumber_kernel(groups, order, indptr, indices, data, picked_like):  # pragma: no cover
     """The block of row groups ``groups`` and moves inside it ``indptr``/``indices``/
-    ``data`` renumbered in ``order``: the old places of the new choices (in the type of
+    ``data`` renumbered in ``order`` (a permutation of its states: every row is
+    written once, at its new place): the old places of the new choices (in the type of
     ``picked_like``), each state's first choice (int64), and the rows taken in that
     order with their columns renamed to the new places (each row's entries in their
     stored order, the index types kept)."""
@@ -149,13 +150,18 @@ def renumber_kernel(groups, order, indptr, indices, data, picked_like):  # pragm
             new_ptr[c] = total
     new_idx = np.empty(total, dtype=indices.dtype)
     new_val = np.empty(total, dtype=data.dtype)
-    a = 0
-    for c in range(m):
-        r = picked[c]
-        for e in range(indptr[r], indptr[r + 1]):
-            new_idx[a] = place[indices[e]]
-            new_val[a] = data[e]
-            a += 1
+    # the rows read in their stored order and each written to its new place: read in
+    # the new order they are scattered (QVBS zeroconf 1000-6-false's block of 550,097
+    # states, 1.25 million entries: 44 against 31 ms)
+    for s in range(n):
+        c = starts[place[s]]
+        for r in range(groups[s], groups[s + 1]):
+            a = new_ptr[c]
+            for e in range(indptr[r], indptr[r + 1]):
+                new_idx[a] = place[indices[e]]
+                new_val[a] = data[e]
+                a += 1
+            c += 1
     return picked, starts, new_ptr, new_idx, new_val
 
 
