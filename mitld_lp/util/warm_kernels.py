@@ -191,6 +191,16 @@ SIGNATURES: dict[str, dict[str, tuple[str, ...]]] = {
             "i8/1C/ro i4/1C/ro i4/1C/ro f8/1C/ro b1/1C/ro bool i4/1C/ro i4/1C/ro b1/1C/ro i8/1C",
         ),
     },
+    "mitld_lp.solvers.order_kernels": {
+        "renumber_kernel": (
+            "i8/1C i8/1C i4/1C i4/1C f8/1C i4/1C",
+            "i8/1C i8/1C i8/1C i8/1C f8/1C i4/1C",
+        ),
+        "value_order_kernel": (
+            "i8/1C i4/1C i4/1C f8/1C i4/1C",
+            "i8/1C i8/1C i8/1C f8/1C i8/1C",
+        ),
+    },
     "mitld_lp.solvers.quotient_kernels": {
         "quotient_entries": (
             "i4/1C i4/1C f8/1C i4/1C i4/1C int f8/2C bool f8/1C i4/1C i4/1C f8/2C",
