@@ -15,6 +15,7 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 from test_cert_small_exact import exact_optimum, paid_kernels, small_model
 
 from mitld_lp.solvers import certify as C
@@ -135,3 +136,24 @@ def test_the_compiled_blocks_ran_on_the_brute_force_models(monkeypatch) -> None:
                       zero=np.array([p == 0 for p in v]),
                       one=None if upper else np.array([p == 1 for p in v]))
     assert any(fired)
+
+
+@pytest.mark.parametrize("distinct", [True, False])
+def test_the_single_states_order_and_level_starts(distinct) -> None:
+    """The single states' set-up (every component one state, or some not) against a
+    count written here: the single states in the blocks' order, and per level the
+    number of single states at lower levels."""
+    rng = np.random.default_rng(85_300 + distinct)
+    n = 600
+    comp = rng.permutation(2 * n)[:n] if distinct else rng.integers(0, n // 2, size=n)
+    level = rng.integers(0, 25, size=2 * n)
+    blk = blocks_from(comp, level, np.zeros(n))
+    sub = sp.csr_array((n, n))
+    got = CH._Singles(sub, blk)
+    lv = blk.level[blk.component]
+    one = blk.size[blk.component] == 1
+    want = [s for s in blk.by_level.tolist() if one[s]]
+    assert got.order.tolist() == want and got.order.dtype == np.int64
+    assert got.order.flags.writeable
+    assert got.at.tolist() == [int(np.sum(one & (lv < k))) for k in range(blk.n_levels + 1)]
+    assert (blk.n_components == n) == distinct

@@ -390,10 +390,18 @@ class _Singles:
 
     def __init__(self, sub: sp.csr_array, blk: Blocks) -> None:
         order = blk.by_level
-        single = blk.single(order)
-        self.order = order[single]
-        level_of = np.repeat(np.arange(blk.n_levels), np.diff(blk.level_starts))[single]
-        self.at = np.searchsorted(level_of, np.arange(blk.n_levels + 1))
+        if blk.n_components == order.shape[0]:
+            # every component one state (QVBS csma 3-4 all_before_max's 718,348): every
+            # state single, each level's first position the blocks' own; the same
+            # arrays (copies: writable, as the kernels' signatures read them) without
+            # two gathers, a mask and a search of every state (some 8 ms)
+            self.order = order.copy()
+            self.at = np.array(blk.level_starts, dtype=np.int64)
+        else:
+            single = blk.single(order)
+            self.order = order[single]
+            level_of = np.repeat(np.arange(blk.n_levels), np.diff(blk.level_starts))[single]
+            self.at = np.searchsorted(level_of, np.arange(blk.n_levels + 1))
         self.sub = sub
         # compiled as the quotient's walks are, or wherever a compiled kernel's load is
         # paid and the levels are many (QVBS zeroconf_dl 1000-1-30: 920 levels, some
