@@ -91,6 +91,16 @@ def test_the_numpy_calls_run_where_the_kernel_may_not(monkeypatch) -> None:
     assert CC.compiled_chain_blocks(comp, level, np.zeros(100)) is None  # too few
 
 
+def _optimal(mdp, exact, upper: bool):
+    """The brute force's optimum of ``small_model``'s five states, an optimal policy,
+    and the certificate's sense with the states it is told are 0 (and, for a minimum,
+    1)."""
+    v, policy = exact_optimum(mdp, exact, 5, upper)
+    known = {"sense": "max" if upper else "min", "zero": np.array([p == 0 for p in v]),
+             "one": None if upper else np.array([p == 1 for p in v])}
+    return v, policy, known
+
+
 @pytest.mark.parametrize("seed", range(8))
 def test_brackets_hold_the_brute_force_optimum_with_the_compiled_blocks(
         seed, monkeypatch) -> None:
@@ -99,17 +109,13 @@ def test_brackets_hold_the_brute_force_optimum_with_the_compiled_blocks(
     with the chain's blocks compiled and by NumPy: the same bits."""
     paid_kernels(monkeypatch, True)
     mdp, exact = small_model(seed, 5)
-    target = np.asarray(mdp.target)
     for upper in (True, False):
-        v, policy = exact_optimum(mdp, exact, 5, upper)
-        zero = np.array([p == 0 for p in v])
-        one = None if upper else np.array([p == 1 for p in v])
+        v, policy, known = _optimal(mdp, exact, upper)
         got = set()
         for compiled in (True, False):
             monkeypatch.setattr(CH, "compiled_chain_blocks",
                                 COMPILED_BLOCKS if compiled else (lambda *a: None))
-            cert = C.certify(mdp, target, policy, sense="max" if upper else "min",
-                             zero=zero, one=one)
+            cert = C.certify(mdp, np.asarray(mdp.target), policy, **known)
             assert Fraction(cert.lower) <= v[0] <= Fraction(cert.upper), (upper, v[0], cert)
             got.add((cert.lower.hex(), cert.upper.hex(), cert.certified,
                      np.asarray(cert.values).tobytes()))
@@ -131,10 +137,8 @@ def test_the_compiled_blocks_ran_on_the_brute_force_models(monkeypatch) -> None:
     for seed in range(8):
         mdp, exact = small_model(seed, 5)
         for upper in (True, False):
-            v, policy = exact_optimum(mdp, exact, 5, upper)
-            C.certify(mdp, np.asarray(mdp.target), policy, sense="max" if upper else "min",
-                      zero=np.array([p == 0 for p in v]),
-                      one=None if upper else np.array([p == 1 for p in v]))
+            _, policy, known = _optimal(mdp, exact, upper)
+            C.certify(mdp, np.asarray(mdp.target), policy, **known)
     assert any(fired)
 
 
