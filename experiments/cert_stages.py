@@ -142,6 +142,9 @@ TIMED = (("mitld_lp.routes.plain", "solve_models", "solve_stage"),
          ("mitld_lp.solvers.certify_chain", "compiled_chain_parts", "chain_parts"),
          ("mitld_lp.solvers.certify_chain", "_gathered", "chain_gather"),
          ("mitld_lp.solvers.certify_chain", "blocks_from", "chain_blocks"),
+         # layer-85b: the same blocks by one compiled call, in the same column (its
+         # NumPy calls then run only where it returns None: the sum is the blocks')
+         ("mitld_lp.solvers.certify_chain", "compiled_chain_blocks", "chain_blocks"),
          ("mitld_lp.solvers.certify_chain", "_Singles.__init__", "chain_singles"),
          ("mitld_lp.solvers.certify_chain", "walk_of", "chain_walk"),
          # fixed-82: the analysis's parts where it calls them (the product's components
@@ -163,7 +166,8 @@ that first read, where the route needs it (absent before).  ``sweeps``: the inte
 iteration's sweeps (every block's), ``ms_per_sweep`` the sweeps' CPU (compiled and
 NumPy) over them (empty where none)."""
 COLUMNS = ("instance", "checkout", "round", "lower", "upper", "solve_cpu", "sweeps",
-           "ms_per_sweep", *(t[-1] if len(t) == 3 else t[1] for t in TIMED), "chain_rest")
+           "ms_per_sweep", *dict.fromkeys(t[-1] if len(t) == 3 else t[1] for t in TIMED),
+           "chain_rest")
 """``chain_rest``: the chain's CPU outside its sets (``chain_sets`` / ``chain_parts``)
 and ``_solve``: the NumPy gather of the solved states' rows where it runs, inline in a
 checkout before cert-78."""
@@ -172,7 +176,7 @@ checkout before cert-78."""
 TRACED = tuple((module, name) for module, name, *_ in TIMED
                if module.startswith("mitld_lp.solvers.certify") and name not in (
                    "_fails_among", "_touched", "_escapes", "compiled_checks",
-                   "compiled_needs", "readers_by_column", "blocks_from",
+                   "compiled_needs", "readers_by_column", "blocks_from", "compiled_chain_blocks",
                    "_Singles.__init__", "walk_of")) + (
     ("mitld_lp.solvers.certify", "_trapped"),)
 """The certificate's pieces whose traced peaks ``--memory`` reads (module, attribute);

@@ -23,7 +23,7 @@ from mitld_lp.util import kernel_loader
 # numba's cached machine code run without importing numba; numba itself on a miss
 numba = kernel_loader.lazy_numba(globals())
 
-__all__ = ["bellman_rows", "chain_parts", "chain_sets", "cycling"]
+__all__ = ["bellman_rows", "chain_blocks", "chain_parts", "chain_sets", "cycling"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -198,6 +198,69 @@ def chain_parts(states, rows, indptr, indices, data, target, never,
         j += 1
         ptr[j] = pos
     return idx, b, vals, cols, ptr
+
+
+@numba.njit(cache=True, nogil=True)
+def chain_blocks(comp, level):  # pragma: no cover - compiled
+    """What :func:`~mitld_lp.solvers.graph.blocks_from` makes with NumPy for a chain's
+    states whose components ``comp`` (ids of a larger graph's, non-negative) and their
+    levels ``level[comp]`` (non-negative) are known: the components and their levels
+    renumbered densely in increasing order (a table of the ids present, as its
+    ``_renumbered``), each component's size, the states ordered by level keeping ties
+    in their order (a counting sort: the one permutation of a stable sort) and each
+    level's first position.  Returns ``(component, level, size, by_level,
+    level_starts)``, int64 as NumPy's; a pass or two over the states and one over the
+    ids' table, not two tables, a gather and a sort of NumPy calls."""
+    n = comp.shape[0]
+    top = 0
+    for i in range(n):
+        if comp[i] + 1 > top:
+            top = comp[i] + 1
+    rank = np.zeros(top, dtype=np.int32)  # 1 where present, then each id's rank
+    k = 0
+    for i in range(n):
+        if not rank[comp[i]]:
+            rank[comp[i]] = 1
+            k += 1
+    # the ids in increasing order: each its rank and its level, the levels' top
+    dlevel = np.empty(k, dtype=np.int64)
+    j = 0
+    ltop = 0
+    for c in range(top):
+        if rank[c]:
+            rank[c] = j
+            lv = level[c]
+            dlevel[j] = lv
+            if lv + 1 > ltop:
+                ltop = lv + 1
+            j += 1
+    lrank = np.zeros(ltop, dtype=np.int64)
+    for j in range(k):
+        lrank[dlevel[j]] = 1
+    n_levels = 0
+    for lv in range(ltop):
+        if lrank[lv]:
+            lrank[lv] = n_levels
+            n_levels += 1
+    for j in range(k):
+        dlevel[j] = lrank[dlevel[j]]
+    dense = np.empty(n, dtype=np.int64)
+    size = np.zeros(k, dtype=np.int64)
+    starts = np.zeros(n_levels + 1, dtype=np.int64)
+    for i in range(n):
+        d = rank[comp[i]]
+        dense[i] = d
+        size[d] += 1
+        starts[dlevel[d] + 1] += 1
+    for lv in range(n_levels):
+        starts[lv + 1] += starts[lv]
+    at = starts[:n_levels].copy()
+    order = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        lv = dlevel[dense[i]]
+        order[at[lv]] = i
+        at[lv] += 1
+    return dense, dlevel, size, order, starts
 
 
 @numba.njit(cache=True, nogil=True)

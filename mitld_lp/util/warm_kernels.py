@@ -98,6 +98,9 @@ SIGNATURES: dict[str, dict[str, tuple[str, ...]]] = {
         "chain_parts": (
             "i8/1C i8/1C i4/1C i4/1C f8/1C b1/1C b1/1C b1/1C",
         ),
+        "chain_blocks": (
+            "i4/1C i4/1C/ro",
+        ),
         "cycling": (
             "i8/1C/ro i4/1C/ro i4/1C/ro i4/1C/ro b1/1C/ro b1/1C",
         ),
