@@ -162,7 +162,8 @@ tracemalloc.start()
 sl = SingleLevels(q, b, compiled=True)
 held, peak = tracemalloc.get_traced_memory()
 tracemalloc.stop()
-_, _, cols, vals = sl.entries()
+_, cols, vals = rows.off_diagonal_entries(q.matrix, sl.choices,
+                                          np.repeat(sl.states, np.diff(sl.state_choice)))
 own = sum(a.nbytes for a in (sl.states, sl.choices, sl.leave, sl.level_state,
                              sl.state_choice))
 print(json.dumps(dict(held=held, peak=peak, own=own, copy=cols.nbytes + vals.nbytes,
