@@ -33,8 +33,9 @@ _WALKS = ("single_bounds", "single_bounds_values", "single_values", "single_flow
 
 
 def _as_python(monkeypatch: pytest.MonkeyPatch) -> types.SimpleNamespace:
-    """The single walks' kernels as plain Python (their ``py_func``s, ``_score`` too)."""
+    """The single walks' kernels as plain Python (their ``py_func``s, their helpers' too)."""
     monkeypatch.setattr(lk, "_score", lk._score.py_func)
+    monkeypatch.setattr(lk, "_row_sums", lk._row_sums.py_func)
     return types.SimpleNamespace(**{k: getattr(lk, k).py_func for k in _WALKS})
 
 

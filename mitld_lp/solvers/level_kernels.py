@@ -41,6 +41,22 @@ def _score(acc, reward, leave):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
+def _row_sums(indptr, indices, data, ch, s, x, acc):  # pragma: no cover - compiled
+    """``acc[j] = sum P(ch, t) x[t, j]`` over row ``ch``'s entries but those in column
+    ``s`` (the state's self-loop), each sum from 0 in the entries' order."""
+    k = acc.shape[0]
+    for j in range(k):
+        acc[j] = 0.0
+    for e in range(indptr[ch], indptr[ch + 1]):
+        t = indices[e]
+        if t == s:
+            continue
+        w = data[e]
+        for j in range(k):
+            acc[j] += w * x[t, j]
+
+
+@numba.njit(cache=True, nogil=True)
 def single_bounds(a, z, state_choice, indptr, states, choices, indices, data, leave,
                   rewards, bounds, minimise):  # pragma: no cover - compiled
     """:meth:`SingleLevels.solve` on the single states ``a`` to ``z - 1`` (their level
@@ -53,16 +69,8 @@ def single_bounds(a, z, state_choice, indptr, states, choices, indices, data, le
     for i in range(a, z):
         s = states[i]
         for c in range(state_choice[i], state_choice[i + 1]):
-            for j in range(k):
-                acc[j] = 0.0
             ch = choices[c]
-            for e in range(indptr[ch], indptr[ch + 1]):
-                t = indices[e]
-                if t == s:
-                    continue
-                w = data[e]
-                for j in range(k):
-                    acc[j] += w * bounds[t, j]
+            _row_sums(indptr, indices, data, ch, s, bounds, acc)
             lv = leave[c]
             for j in range(k):
                 val = _score(acc[j], rewards[ch, j], lv)
@@ -102,16 +110,8 @@ def single_bounds_values(a, z, state_choice, indptr, states, choices, indices, d
         n = state_choice[i + 1] - c0
         for m in range(n):
             c = c0 + m
-            for j in range(k):
-                acc[j] = 0.0
             ch = choices[c]
-            for e in range(indptr[ch], indptr[ch + 1]):
-                t = indices[e]
-                if t == s:
-                    continue
-                w = data[e]
-                for j in range(k):
-                    acc[j] += w * bounds[t, j]
+            _row_sums(indptr, indices, data, ch, s, bounds, acc)
             lv = leave[c]
             for j in range(k):
                 val = _score(acc[j], rewards[ch, j], lv)
