@@ -135,6 +135,7 @@ def test_the_pass_peaks_no_higher_with_the_levels_built_first(tmp_path):
     got = json.loads(run.stdout)
     assert got["levels"] >= iteration.RUNS_MIN_LEVELS
     # the exit rewards (two floats a choice) and the bounds (two a state) were alive
-    # through the levels' build; at least half of them no longer are at the peak
-    arrays = 16 * (got["choices"] + got["states"])
-    assert got["new"] <= got["old"] - arrays // 2, got
+    # through the levels' build, which copied the rows; since single-85b the compiled
+    # walks' levels copy no row (their build is no longer the pass's peak: 6.73 -> 4.26
+    # MB here), so built first they only must not raise it
+    assert got["new"] <= got["old"], got

@@ -155,9 +155,10 @@ def test_row_gauge_bounds_the_next_chunk() -> None:
 
 @pytest.mark.parametrize("sense", [Sense.MAX, Sense.MIN])
 def test_compiled_single_levels_hold_no_per_entry_choices(sense: Sense) -> None:
-    """The compiled walks' SingleLevels keeps no ``local``; asked, it gives the NumPy
-    walks' array (values and int32); the entries are the same; and tracemalloc counts
-    no more held than the arrays the walks read (``local`` kept would add 4 bytes a
+    """The compiled walks' SingleLevels keeps no copy of the rows (single-85b: they
+    read the quotient's CSR arrays in place): its :meth:`entries` are the NumPy walks'
+    arrays (values and int32 ``local``), and tracemalloc counts no more held than the
+    per-state and per-choice arrays the walks read (the copy would add 16-20 bytes a
     kept entry)."""
     pytest.importorskip("numba")
     mdp, _, _ = layered_mdp(5, depth=400, width=6)
@@ -172,17 +173,20 @@ def test_compiled_single_levels_hold_no_per_entry_choices(sense: Sense) -> None:
         held = tracemalloc.get_traced_memory()[0] - start
     finally:
         tracemalloc.stop()
-    assert wide.kernels is not None and wide._local is None
-    assert plain.local.dtype == wide.local.dtype == np.int32
-    assert np.array_equal(plain.local, wide.local)
-    for name in ("cols", "vals", "choice_entry", "state_choice", "leave"):
+    assert wide.kernels is not None and wide._local is None and wide.cols is None
+    assert wide.rows.indices is q.matrix.indices and wide.rows.data is q.matrix.data
+    ptr, local, cols, vals = wide.entries()
+    assert plain.local.dtype == local.dtype == np.int32
+    assert np.array_equal(plain.local, local)
+    assert np.array_equal(plain.cols, cols) and np.array_equal(plain.vals, vals)
+    assert np.array_equal(plain.choice_entry, ptr)
+    for name in ("state_choice", "leave"):
         assert np.array_equal(getattr(plain, name), getattr(wide, name)), name
-    arrays = {id(x): x.nbytes for x in (wide.states, wide.choices, wide.cols, wide.vals,
-                                        wide.leave, wide.level_state, wide.state_choice,
-                                        wide.choice_entry, wide.ptr) if x is not None}
+    arrays = {id(x): x.nbytes for x in (wide.states, wide.choices, wide.leave,
+                                        wide.level_state, wide.state_choice)}
     need = sum(arrays.values())
-    local_bytes = 4 * wide.cols.size
-    assert local_bytes > 8192  # large enough for the bound below to see it
+    copy_bytes = cols.nbytes + vals.nbytes
+    assert copy_bytes > 8192  # large enough for the bound below to see it
     assert held <= need + 4096, (held, need)
 
 

@@ -9,7 +9,9 @@ reward; a flow added to a successor in the order of the entries that carry it), 
 its answers are the NumPy walk's to the last bit: one call for a run of levels in
 place of a dozen NumPy calls per level (a deadline clock makes a thousand levels and
 more).  The arrays are those of :class:`~mitld_lp.solvers.topological.SingleLevels`
-(states in level order, their choices, the choices' entries less the self-loops), or
+(states in level order, their choices) and the quotient's own CSR arrays (a choice's
+row read in place, the state's self-loop skipped: the same terms in the same order as
+the copied rows without it, which the NumPy walks read; no copy of the rows), or
 a chain's CSR arrays and :class:`~mitld_lp.solvers.graph.Blocks` order.  One
 exception: :func:`chain_flow` pushes a level's single states before its cyclic ones,
 where :meth:`~mitld_lp.solvers.chain_levels.ChainLevels.solve_transposed`'s NumPy walk
@@ -39,24 +41,36 @@ def _score(acc, reward, leave):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def single_bounds(a, z, state_choice, choice_entry, states, choices, cols, vals, leave,
+def _row_sums(indptr, indices, data, ch, s, x, acc):  # pragma: no cover - compiled
+    """``acc[j] = sum P(ch, t) x[t, j]`` over row ``ch``'s entries but those in column
+    ``s`` (the state's self-loop), each sum from 0 in the entries' order."""
+    k = acc.shape[0]
+    for j in range(k):
+        acc[j] = 0.0
+    for e in range(indptr[ch], indptr[ch + 1]):
+        t = indices[e]
+        if t == s:
+            continue
+        w = data[e]
+        for j in range(k):
+            acc[j] += w * x[t, j]
+
+
+@numba.njit(cache=True, nogil=True)
+def single_bounds(a, z, state_choice, indptr, states, choices, indices, data, leave,
                   rewards, bounds, minimise):  # pragma: no cover - compiled
     """:meth:`SingleLevels.solve` on the single states ``a`` to ``z - 1`` (their level
     order): every column of ``bounds`` at once, each state the best over its choices of
-    ``clip((rewards + sum P x) / (1 - p), 0, 1)``."""
+    ``clip((rewards + sum P x) / (1 - p), 0, 1)`` (the sum over the choice's row of the
+    quotient's CSR arrays, its self-loop skipped)."""
     k = bounds.shape[1]
     acc = np.empty(k)
     best = np.empty(k)
     for i in range(a, z):
+        s = states[i]
         for c in range(state_choice[i], state_choice[i + 1]):
-            for j in range(k):
-                acc[j] = 0.0
-            for e in range(choice_entry[c], choice_entry[c + 1]):
-                t = cols[e]
-                w = vals[e]
-                for j in range(k):
-                    acc[j] += w * bounds[t, j]
             ch = choices[c]
+            _row_sums(indptr, indices, data, ch, s, bounds, acc)
             lv = leave[c]
             for j in range(k):
                 val = _score(acc[j], rewards[ch, j], lv)
@@ -66,13 +80,12 @@ def single_bounds(a, z, state_choice, choice_entry, states, choices, cols, vals,
                     best[j] = min(best[j], val)
                 else:
                     best[j] = max(best[j], val)
-        s = states[i]
         for j in range(k):
             bounds[s, j] = best[j]
 
 
 @numba.njit(cache=True, nogil=True)
-def single_bounds_values(a, z, state_choice, choice_entry, states, choices, cols, vals,
+def single_bounds_values(a, z, state_choice, indptr, states, choices, indices, data,
                          leave, rewards, bounds, minimise, picked, skip, tie, values,
                          picks):  # pragma: no cover - compiled
     """:func:`single_bounds` (the same bounds to the bit) and, in the same pass, for each
@@ -92,18 +105,13 @@ def single_bounds_values(a, z, state_choice, choice_entry, states, choices, cols
     best = np.empty(k)
     score = np.empty(width)
     for i in range(a, z):
+        s = states[i]
         c0 = state_choice[i]
         n = state_choice[i + 1] - c0
         for m in range(n):
             c = c0 + m
-            for j in range(k):
-                acc[j] = 0.0
-            for e in range(choice_entry[c], choice_entry[c + 1]):
-                t = cols[e]
-                w = vals[e]
-                for j in range(k):
-                    acc[j] += w * bounds[t, j]
             ch = choices[c]
+            _row_sums(indptr, indices, data, ch, s, bounds, acc)
             lv = leave[c]
             for j in range(k):
                 val = _score(acc[j], rewards[ch, j], lv)
@@ -113,7 +121,6 @@ def single_bounds_values(a, z, state_choice, choice_entry, states, choices, cols
                     best[j] = min(best[j], val)
                 else:
                     best[j] = max(best[j], val)
-        s = states[i]
         for j in range(k):
             bounds[s, j] = best[j]
         for h in range(p):
@@ -123,10 +130,13 @@ def single_bounds_values(a, z, state_choice, choice_entry, states, choices, cols
             col = picked[h]
             for m in range(n):
                 c = c0 + m
+                ch = choices[c]
                 total = 0.0
-                for e in range(choice_entry[c], choice_entry[c + 1]):
-                    total += vals[e] * values[h, cols[e]]
-                score[m] = _score(total, rewards[choices[c], col], leave[c])
+                for e in range(indptr[ch], indptr[ch + 1]):
+                    t = indices[e]
+                    if t != s:
+                        total += data[e] * values[h, t]
+                score[m] = _score(total, rewards[ch, col], leave[c])
             top_score = score[0]
             for m in range(1, n):
                 top_score = min(top_score, score[m]) if minimise else max(top_score,
@@ -151,7 +161,7 @@ def single_bounds_values(a, z, state_choice, choice_entry, states, choices, cols
 
 
 @numba.njit(cache=True, nogil=True)
-def single_values(a, z, state_choice, choice_entry, states, choices, cols, vals, leave,
+def single_values(a, z, state_choice, indptr, states, choices, indices, data, leave,
                   to_target, skip, values, reduced_choice, weights, tie,
                   minimise):  # pragma: no cover - compiled
     """:func:`~mitld_lp.solvers.topological.solve_single_states` on the single states
@@ -172,10 +182,13 @@ def single_values(a, z, state_choice, choice_entry, states, choices, cols, vals,
         n = state_choice[i + 1] - c0
         for m in range(n):
             c = c0 + m
+            ch = choices[c]
             acc = 0.0
-            for e in range(choice_entry[c], choice_entry[c + 1]):
-                acc += vals[e] * values[cols[e]]
-            score[m] = _score(acc, to_target[choices[c]], leave[c])
+            for e in range(indptr[ch], indptr[ch + 1]):
+                t = indices[e]
+                if t != s:
+                    acc += data[e] * values[t]
+            score[m] = _score(acc, to_target[ch], leave[c])
         best = score[0]
         for m in range(1, n):
             best = min(best, score[m]) if minimise else max(best, score[m])
@@ -201,12 +214,12 @@ def single_values(a, z, state_choice, choice_entry, states, choices, cols, vals,
 
 
 @numba.njit(cache=True, nogil=True)
-def single_flow(first, stop, level_state, state_choice, choice_entry, states, choices,
-                cols, vals, self_loop, weights, x):  # pragma: no cover - compiled
+def single_flow(first, stop, level_state, state_choice, indptr, states, choices,
+                indices, data, self_loop, weights, x):  # pragma: no cover - compiled
     """:func:`~mitld_lp.solvers.lp_blocks.policy_flow` on the single states of levels
     ``stop - 1`` down to ``first`` (upstream first): each state's inflow divided by
-    what its choices do not keep, then pushed along its choices' entries (the
-    self-loops are not among them) in their order."""
+    what its choices do not keep, then pushed along its choices' entries (their rows
+    of the quotient's CSR arrays, the self-loops skipped) in their order."""
     for level in range(stop - 1, first - 1, -1):
         for i in range(level_state[level], level_state[level + 1]):
             s = states[i]
@@ -216,9 +229,12 @@ def single_flow(first, stop, level_state, state_choice, choice_entry, states, ch
                 stay += weights[ch] * self_loop[ch]
             x[s] /= 1.0 - stay
             for c in range(state_choice[i], state_choice[i + 1]):
-                y = weights[choices[c]] * x[s]
-                for e in range(choice_entry[c], choice_entry[c + 1]):
-                    x[cols[e]] += vals[e] * y
+                ch = choices[c]
+                y = weights[ch] * x[s]
+                for e in range(indptr[ch], indptr[ch + 1]):
+                    t = indices[e]
+                    if t != s:
+                        x[t] += data[e] * y
 
 
 @numba.njit(cache=True, nogil=True)

@@ -7,14 +7,26 @@ module: :mod:`~mitld_lp.solvers.graph` and the solvers build on it."""
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.util.sparsetools import sparsetools as _st
 
-__all__ = ["gather_ranges", "off_diagonal_entries", "row_columns", "row_entries",
+__all__ = ["CSRRows", "gather_ranges", "off_diagonal_entries", "row_columns", "row_entries",
            "rows_dot"]
+
+class CSRRows(NamedTuple):
+    """A CSR matrix's three arrays, as the functions here read them (``indptr``,
+    ``indices``, ``data``): held in place of the matrix where a holder must not keep the
+    matrix object alive (:class:`~mitld_lp.solvers.topological.SingleLevels`, kept
+    while a weak reference to the matrix lives)."""
+
+    indptr: np.ndarray
+    indices: np.ndarray
+    data: np.ndarray
+
 
 #: rows read at a time by :func:`off_diagonal_entries` (its temporaries: a batch's,
 #: some 40 bytes an entry; 2**16 rows of two entries were 20 bytes a transition of

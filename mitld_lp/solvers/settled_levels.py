@@ -65,11 +65,12 @@ def settled_by_bounds(q: Quotient, blk: Blocks, singles: SingleLevels,
     candidate[q.zero] = 0.0  # what the walk reads there (never solved: 0)
     sl = singles
     m = sl.choices.size
-    if sl.ptr is not None and _st is not None:
+    ptr, local, cols, vals = sl.entries()  # (a copy for the compiled walks, freed here)
+    if ptr is not None and _st is not None:
         sums = np.zeros(m)
-        _st.csr_matvec(m, n, sl.ptr, sl.cols, sl.vals, candidate, sums)
+        _st.csr_matvec(m, n, ptr, cols, vals, candidate, sums)
     else:
-        sums = np.bincount(sl.local, weights=sl.vals * candidate[sl.cols], minlength=m)
+        sums = np.bincount(local, weights=vals * candidate[cols], minlength=m)
     reward = q.to_target[sl.choices]
     score = reward + sums
     del sums
@@ -87,8 +88,9 @@ def settled_by_bounds(q: Quotient, blk: Blocks, singles: SingleLevels,
     del candidate
     if failed.any():  # and every state that reaches one: walked
         owner = np.repeat(states, np.diff(sl.state_choice))
-        failed = backward_reachable(n, owner[sl.local], sl.cols, failed)
+        failed = backward_reachable(n, owner[local], cols, failed)
         del owner
+    del ptr, local, cols, vals
     take = live & ~failed[states]
     picks = np.asarray(sl.choices, dtype=np.int64)[best[take]]
     values[states[take]] = got[take]

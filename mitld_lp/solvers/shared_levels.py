@@ -120,9 +120,10 @@ def walk_handing(q: Quotient, levels: SingleLevels, rewards: np.ndarray,
     skip = np.stack([np.asarray(m.zero, dtype=bool) for m in models])
     values = np.zeros((len(models), q.n_states))  # a model's row contiguous: no copy
     picks = np.empty((len(models), levels.states.size), dtype=np.int64)
+    rows = levels.rows  # the quotient's rows, read in place
     levels.kernels.single_bounds_values(
-        0, levels.states.size, levels.state_choice, levels.choice_entry, levels.states,
-        levels.choices, levels.cols, levels.vals, levels.leave,
+        0, levels.states.size, levels.state_choice, rows.indptr, levels.states,
+        levels.choices, rows.indices, rows.data, levels.leave,
         np.asarray(rewards, dtype=np.float64), bounds, q.sense is Sense.MIN, picked,
         skip, TIE, values, picks)
     kept[5][:] = [(m.to_target, Walked(values[j], picks[j])) for j, m in enumerate(models)]

@@ -44,7 +44,7 @@ from mitld_lp.solvers.graph import (
 )
 from mitld_lp.solvers.level_batches import TIE
 from mitld_lp.solvers.reduced import Quotient
-from mitld_lp.solvers.rows import gather_ranges, off_diagonal_entries, rows_dot
+from mitld_lp.solvers.rows import CSRRows, gather_ranges, off_diagonal_entries, rows_dot
 from mitld_lp.util import kernel_loader
 from mitld_lp.util.arrays import index_dtype
 
@@ -176,12 +176,14 @@ class SingleLevels:
     gathering each level's choices and entries anew cost more than the arithmetic.
     Each level's single states, their choices and the entries of those (a choice's
     self-loop left out: it is divided out) are contiguous slices of the arrays made
-    here, so a level costs a few NumPy calls on its slice.  ``skip``: states left out
-    (they keep what they have)."""
+    here, so a level costs a few NumPy calls on its slice.  The compiled walks copy no
+    entry: they read each choice's row of the quotient's CSR arrays (:attr:`rows`) in
+    place and skip the state's self-loop, the same terms in the same order (single-85b).
+    ``skip``: states left out (they keep what they have)."""
 
     __slots__ = ("states", "choices", "_local", "cols", "vals", "leave", "level_state",
                  "state_choice", "choice_entry", "sense", "kernels", "positive", "runs",
-                 "run_at", "first_choice", "owner_at", "ptr")
+                 "run_at", "first_choice", "owner_at", "ptr", "rows")
 
     def __init__(self, q: Quotient, b: Blocks, skip: np.ndarray | None = None, *,
                  compiled: bool | None = None) -> None:
@@ -207,8 +209,20 @@ class SingleLevels:
         counts = hi - lo  # per state, its choices
         del lo, hi
         self.state_choice = np.concatenate([[0], np.cumsum(counts)])
-        if not wide:
-            self.state_choice = self.state_choice.astype(index_dtype(self.choices.size))
+        self.leave = 1.0 - b.self_loop[self.choices]
+        self.positive = bool(np.all(self.leave > 0))  # no choice to guard (no loop of 1)
+        self.sense = q.sense
+        # the quotient's CSR arrays (not the matrix object: a kept SingleLevels must
+        # not keep it alive, :mod:`~mitld_lp.solvers.shared_levels`): the compiled
+        # walks read its rows in place, each choice's self-loop skipped (no copy of the
+        # rows: 12-15 bytes a transition at the solve's peak on issue 45's sensed
+        # case); :meth:`entries` copies them
+        self.rows = CSRRows(q.matrix.indptr, q.matrix.indices, q.matrix.data)
+        if wide:
+            self._local = self.cols = self.vals = self.ptr = self.choice_entry = None
+            self.runs = self.run_at = self.first_choice = self.owner_at = None
+            return
+        self.state_choice = self.state_choice.astype(index_dtype(self.choices.size))
         # the self-loops left out (divided out), read in batches, ``local`` int32 where
         # the choices' count allows; no per-choice owner is kept (the flow's walk makes
         # a group's own, :func:`~mitld_lp.solvers.level_batches.flow`)
@@ -218,27 +232,18 @@ class SingleLevels:
         self.choice_entry = np.zeros(self.choices.size + 1, dtype=np.int64)
         np.cumsum(np.bincount(self._local, minlength=self.choices.size),
                   out=self.choice_entry[1:])
-        if wide:  # the compiled walks read the pointers: ``local`` made when asked
-            self._local = None  # (2.1 bytes a transition on issue 45's sensed case)
         # the choices' entry pointers in the columns' index type: a level's sums (and
         # the flow's scatter) are then one call of SciPy's compiled CSR (CSC) product
         # on the walk's arrays as they are (:mod:`~mitld_lp.solvers.level_batches`)
         fits = (self.cols.dtype in (np.int32, np.int64) and self.vals.dtype == np.float64
                 and self.cols.size < np.iinfo(self.cols.dtype).max)
         self.ptr = self.choice_entry.astype(self.cols.dtype) if fits else None
-        if not wide and self.ptr is not None:  # one array of pointers, not two
+        if self.ptr is not None:  # one array of pointers, not two
             self.choice_entry = self.ptr
-        self.leave = 1.0 - b.self_loop[self.choices]
-        self.positive = bool(np.all(self.leave > 0))  # no choice to guard (no loop of 1)
-        self.sense = q.sense
-        # the NumPy walks' slices, once (not for the compiled walks, which never read
-        # them): per level with single states its states', choices' and entries' bounds
-        # (``runs``, ``run_at[k]`` the first run of level ``k`` or above); per state its
-        # first choice and per choice its state, both counted from the start of their
-        # level (a level's segments without arithmetic)
-        if wide:
-            self.runs = self.run_at = self.first_choice = self.owner_at = None
-            return
+        # the NumPy walks' slices, once: per level with single states its states',
+        # choices' and entries' bounds (``runs``, ``run_at[k]`` the first run of level
+        # ``k`` or above); per state its first choice and per choice its state, both
+        # counted from the start of their level (a level's segments without arithmetic)
         at = self.level_state
         marks = np.flatnonzero(np.diff(at))
         a, z = at[marks], at[marks + 1]
@@ -258,12 +263,31 @@ class SingleLevels:
     @property
     def local(self) -> np.ndarray:
         """Per kept entry, its choice (a position in :attr:`choices`), in the entries'
-        order; the compiled walks keep none and it is counted out of
-        :attr:`choice_entry` when asked (the same array)."""
+        order (the NumPy walks' copy of the rows; :meth:`entries` for the compiled
+        walks')."""
+        if self._local is None:
+            raise ValueError("SingleLevels.local: the compiled walks keep no copy of "
+                             "the rows (use entries())")
+        return self._local
+
+    def entries(self) -> tuple[np.ndarray | None, np.ndarray, np.ndarray, np.ndarray]:
+        """The choices' rows without their self-loops as ``(ptr, local, cols, vals)``
+        (:func:`~mitld_lp.solvers.rows.off_diagonal_entries`; ``ptr`` each choice's
+        first entry, None where the columns' type cannot hold the count): the NumPy
+        walks' arrays, or for the compiled walks (which read the quotient's rows in
+        place and keep none) a copy made on each call, for a caller that reads them
+        whole (:func:`~mitld_lp.solvers.settled_levels.settled_by_bounds`)."""
         if self._local is not None:
-            return self._local
-        n = self.choices.size
-        return np.repeat(np.arange(n, dtype=index_dtype(n)), np.diff(self.choice_entry))
+            return self.ptr, self._local, self.cols, self.vals
+        counts = np.diff(self.state_choice)
+        local, cols, vals = off_diagonal_entries(self.rows, self.choices,
+                                                 np.repeat(self.states, counts))
+        ptr = None
+        if (cols.dtype in (np.int32, np.int64) and vals.dtype == np.float64
+                and cols.size < np.iinfo(cols.dtype).max):
+            ptr = np.zeros(self.choices.size + 1, dtype=cols.dtype)
+            np.cumsum(np.bincount(local, minlength=self.choices.size), out=ptr[1:])
+        return ptr, local, cols, vals
 
     def solve(self, first: int, stop: int, rewards: np.ndarray,
               bounds: np.ndarray) -> None:
@@ -276,8 +300,9 @@ class SingleLevels:
         if lo_s == hi_s:
             return
         if self.kernels is not None:
-            self.kernels.single_bounds(lo_s, hi_s, self.state_choice, self.choice_entry,
-                                       self.states, self.choices, self.cols, self.vals,
+            m = self.rows
+            self.kernels.single_bounds(lo_s, hi_s, self.state_choice, m.indptr,
+                                       self.states, self.choices, m.indices, m.data,
                                        self.leave, np.asarray(rewards, dtype=np.float64),
                                        bounds, self.sense is Sense.MIN)
             return
@@ -317,9 +342,10 @@ class SingleLevels:
         if at[first] == at[stop]:
             return
         if self.kernels is not None:
+            m = self.rows
             self.kernels.single_values(int(at[first]), int(at[stop]), self.state_choice,
-                                       self.choice_entry, self.states, self.choices,
-                                       self.cols, self.vals, self.leave, to_target, skip,
+                                       m.indptr, self.states, self.choices,
+                                       m.indices, m.data, self.leave, to_target, skip,
                                        values, reduced_choice, weights, TIE,
                                        self.sense is Sense.MIN)
             return
@@ -337,8 +363,9 @@ class SingleLevels:
         if at[first] == at[stop]:
             return
         if self.kernels is not None:
-            self.kernels.single_flow(first, stop, at, self.state_choice, self.choice_entry,
-                                     self.states, self.choices, self.cols, self.vals,
+            m = self.rows
+            self.kernels.single_flow(first, stop, at, self.state_choice, m.indptr,
+                                     self.states, self.choices, m.indices, m.data,
                                      self_loop, weights, x)
             return
         runs = self._runs(first, stop)

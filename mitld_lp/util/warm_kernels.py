@@ -172,17 +172,17 @@ SIGNATURES: dict[str, dict[str, tuple[str, ...]]] = {
             "i8/1C i4/1C i4/1C f8/1C f8/1C/ro f8/1C f8/1C f8/1C f8/1C",
         ),
         "single_bounds": (
-            "int int i8/1C i8/1C i8/1C i8/1C i4/1C f8/1C f8/1C f8/2C f8/2C bool",
+            "int int i8/1C i4/1C i8/1C i8/1C i4/1C f8/1C f8/1C f8/2C f8/2C bool",
         ),
         "single_bounds_values": (
-            "int int i8/1C i8/1C i8/1C i8/1C i4/1C f8/1C f8/1C f8/2C f8/2C bool i8/1C b1/2C float "
+            "int int i8/1C i4/1C i8/1C i8/1C i4/1C f8/1C f8/1C f8/2C f8/2C bool i8/1C b1/2C float "
             "f8/2C i8/2C",
         ),
         "single_flow": (
-            "int int i8/1C i8/1C i8/1C i8/1C i8/1C i4/1C f8/1C f8/1C/ro f8/1C f8/1C",
+            "int int i8/1C i8/1C i4/1C i8/1C i8/1C i4/1C f8/1C f8/1C/ro f8/1C f8/1C",
         ),
         "single_values": (
-            "int int i8/1C i8/1C i8/1C i8/1C i4/1C f8/1C f8/1C f8/1C/ro b1/1C/ro f8/1C i8/1C "
+            "int int i8/1C i4/1C i8/1C i8/1C i4/1C f8/1C f8/1C f8/1C/ro b1/1C/ro f8/1C i8/1C "
             "f8/1C float bool",
         ),
     },
