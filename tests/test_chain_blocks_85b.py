@@ -1,5 +1,5 @@
 """layer-85b: a chain's blocks of the support layers by one compiled call
-(:func:`mitld_lp.solvers.certify_compiled.compiled_chain_blocks`).
+(:func:`mitld_lp.solvers.certify_blocks.compiled_chain_blocks`).
 
 The compiled blocks are held against :func:`mitld_lp.solvers.graph.blocks_from`'s NumPy
 calls array for array, and their pieces against constructions written here (the ids'
@@ -19,12 +19,13 @@ import scipy.sparse as sp
 from test_cert_small_exact import exact_optimum, paid_kernels, small_model
 
 from mitld_lp.solvers import certify as C
+from mitld_lp.solvers import certify_blocks as CB
 from mitld_lp.solvers import certify_chain as CH
 from mitld_lp.solvers import certify_compiled as CC
 from mitld_lp.solvers.graph import blocks_from
 
 FIELDS = ("component", "level", "size", "by_level", "level_starts", "self_loop")
-COMPILED_BLOCKS = CC.compiled_chain_blocks  # (the spies below replace it)
+COMPILED_BLOCKS = CB.compiled_chain_blocks  # (the spies below replace it)
 
 
 def _ids(seed: int, n: int, top: int, n_levels: int, level_top: int):
@@ -47,7 +48,7 @@ def test_compiled_blocks_are_numpys(seed, n, top, n_levels, level_top, monkeypat
     paid_kernels(monkeypatch, True)
     comp, level = _ids(seed, n, top, n_levels, level_top)
     diag = np.random.default_rng(seed).random(n)
-    got = CC.compiled_chain_blocks(comp, level, diag)
+    got = CB.compiled_chain_blocks(comp, level, diag)
     assert got is not None
     want = blocks_from(comp, level, diag)
     for name in FIELDS:
@@ -70,10 +71,10 @@ def test_int64_ids_and_writable_levels_give_the_same_blocks(monkeypatch) -> None
     paid_kernels(monkeypatch, True)
     comp, level = _ids(7, 800, 900, 12, 30)
     diag = np.zeros(800)
-    a = CC.compiled_chain_blocks(comp.astype(np.int64), level.astype(np.int64), diag)
+    a = CB.compiled_chain_blocks(comp.astype(np.int64), level.astype(np.int64), diag)
     ro = level.copy()
     ro.flags.writeable = False
-    b = CC.compiled_chain_blocks(comp, ro, diag)
+    b = CB.compiled_chain_blocks(comp, ro, diag)
     for name in FIELDS:
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
 
@@ -81,14 +82,14 @@ def test_int64_ids_and_writable_levels_give_the_same_blocks(monkeypatch) -> None
 def test_the_numpy_calls_run_where_the_kernel_may_not(monkeypatch) -> None:
     comp, level = _ids(8, 100, 200, 4, 10)
     paid_kernels(monkeypatch, False)
-    assert CC.compiled_chain_blocks(comp, level, np.zeros(100)) is None  # no load paid
+    assert CB.compiled_chain_blocks(comp, level, np.zeros(100)) is None  # no load paid
     paid_kernels(monkeypatch, True)
     bad = comp.copy()
     bad[3] = -1
-    assert CC.compiled_chain_blocks(bad, level, np.zeros(100)) is None  # a negative id
-    assert CC.compiled_chain_blocks(comp, level[:150], np.zeros(100)) is None  # no level
+    assert CB.compiled_chain_blocks(bad, level, np.zeros(100)) is None  # a negative id
+    assert CB.compiled_chain_blocks(comp, level[:150], np.zeros(100)) is None  # no level
     monkeypatch.setattr(CC, "COMPILED_CHECK_MIN_ROWS", 101)
-    assert CC.compiled_chain_blocks(comp, level, np.zeros(100)) is None  # too few
+    assert CB.compiled_chain_blocks(comp, level, np.zeros(100)) is None  # too few
 
 
 def _optimal(mdp, exact, upper: bool):

@@ -10,8 +10,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, MDPShape
+from mitld_lp.solvers.certify_blocks import compiled_chain_blocks
 from mitld_lp.solvers.certify_compiled import (
-    compiled_chain_blocks,
     compiled_chain_parts,
     compiled_chain_sets,
     compiled_cycling,
