@@ -309,7 +309,7 @@ def test_the_policy_rows_product_sums_as_a_python_loop(monkeypatch) -> None:
         want.append(acc)
     got = certify_policy._RowsProduct(m, rows)(x)
     assert got.tobytes() == np.array(want).tobytes()
-    monkeypatch.setattr(certify_policy, "_st", None)
+    monkeypatch.setattr(certify_policy, "sparsetools", None)
     fallback = certify_policy._RowsProduct(m, rows)
     assert fallback.ptr is None
     assert fallback(x).tobytes() == np.array(want).tobytes()

@@ -232,13 +232,13 @@ def test_in_place_probe_refuses_a_product_that_reads_its_input_first(monkeypatch
     monkeypatch.setattr(level_sweeps, "_IN_PLACE", None)
     assert level_sweeps._in_place() is True
 
-    real = level_sweeps._st
+    real = level_sweeps.sparsetools
 
     class _Copying:
         @staticmethod
         def csc_matvec(n_row, n_col, ptr, rows, vals, x, y):
             real.csc_matvec(n_row, n_col, ptr, rows, vals, x.copy(), y)
 
-    monkeypatch.setattr(level_sweeps, "_st", _Copying)
+    monkeypatch.setattr(level_sweeps, "sparsetools", _Copying)
     monkeypatch.setattr(level_sweeps, "_IN_PLACE", None)
     assert level_sweeps._in_place() is False

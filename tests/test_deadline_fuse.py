@@ -196,8 +196,8 @@ def test_prism_deadline_with_ties_holds_storms_exact_value(tmp_path, monkeypatch
     assert fast.upper - fast.lower < 1e-6
     assert 0.01 < float(exact) < 0.99  # not decided by the graph alone
     # the NumPy calls the compiled products replace: the same bits
-    monkeypatch.setattr(level_batches, "_st", None)
-    monkeypatch.setattr(R, "_st", None)
+    monkeypatch.setattr(level_batches, "sparsetools", None)
+    monkeypatch.setattr(R, "sparsetools", None)
     slow = synthesize(load_model(model))
     assert (slow.lower, slow.upper) == (fast.lower, fast.upper)
 
@@ -230,11 +230,11 @@ def test_chain_levels_by_compiled_product_as_by_bincount(seed: int, monkeypatch)
             calls.append(1)
             return st.csr_matvec(*a)
 
-    st, spy = CC._st, Spy()
-    monkeypatch.setattr(CC, "_st", spy)
+    st, spy = CC.sparsetools, Spy()
+    monkeypatch.setattr(CC, "sparsetools", spy)
     v, w = CC._solve(sub, b, kappa, None)
     assert calls  # the compiled product was used
-    monkeypatch.setattr(CC, "_st", None)
+    monkeypatch.setattr(CC, "sparsetools", None)
     v0, w0 = CC._solve(sub, b, kappa, None)
     assert np.array_equal(v, v0) and np.array_equal(w, w0)
     dense = np.linalg.solve(np.eye(n) - sub.toarray(), b)

@@ -45,7 +45,7 @@ def _walks(monkeypatch, csr: bool):
     """The batched walks with SciPy's compiled products (``csr``) or the ``bincount``
     ones (SciPy's taken away)."""
     if not csr:
-        monkeypatch.setattr(level_batches, "_st", None)
+        monkeypatch.setattr(level_batches, "sparsetools", None)
 
 
 def _bounds(q, sl, rewards):

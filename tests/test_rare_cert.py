@@ -56,7 +56,7 @@ def _closure(source: np.ndarray, succ: np.ndarray, seeds: np.ndarray) -> set[int
 def test_reversed_is_the_stable_argsort_byte_for_byte(monkeypatch, dtype, sorted_sources,
                                                       scipy_routine) -> None:
     if not scipy_routine:  # a SciPy without the compiled transpose: the argsort
-        monkeypatch.setattr(reach, "_st", None)
+        monkeypatch.setattr(reach, "sparsetools", None)
     rng = np.random.default_rng(11)
     for trial in range(60):
         n = int(rng.integers(1, 40))
@@ -128,8 +128,8 @@ def test_a_rare_models_bracket_holds_storms_exact_value(tmp_path: Path, walks, m
     got = []
     for compiled in (True, False):
         walks(compiled)
-        for routine in (reach._st, None):  # SciPy's transpose, then the argsort
-            monkeypatch.setattr(reach, "_st", routine)
+        for routine in (reach.sparsetools, None):  # SciPy's transpose, then the argsort
+            monkeypatch.setattr(reach, "sparsetools", routine)
             r = synthesize(load_model(path))
             assert r.certified, r.failed_checks
             assert Fraction(r.lower) <= exact <= Fraction(r.upper)

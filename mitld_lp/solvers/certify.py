@@ -94,7 +94,7 @@ from mitld_lp.solvers.rounding import (
 )
 from mitld_lp.solvers.rows import gather_ranges, row_entries, rows_dot
 from mitld_lp.util.heap import release_free_memory
-from mitld_lp.util.sparsetools import sparsetools as _st
+from mitld_lp.util.sparsetools import sparsetools
 
 __all__ = ["ETA", "UNIT", "HAZARD_ACCURACY", "Rounding", "rounding", "below", "above",
            "Chain", "chain", "RowModel", "support_layers", "Side", "Certificate", "certify",
@@ -133,7 +133,7 @@ def _direct(m: sp.csr_array, x: np.ndarray) -> bool:
     product by their pointers into the whole matrix (``m[a:z] @ x`` calls the same
     kernel on a copy of those rows: each row's sum from 0 in its entries' order, the
     same bits) rather than slice them: float64 values and vector, one index type."""
-    return (_st is not None and m.data.dtype == np.float64 and x.dtype == np.float64
+    return (sparsetools is not None and m.data.dtype == np.float64 and x.dtype == np.float64
             and x.ndim == 1 and x.flags.c_contiguous and m.indptr.dtype == m.indices.dtype
             and m.indices.dtype in (np.int32, np.int64)
             and x.shape[0] == m.shape[1])
@@ -174,7 +174,7 @@ def numpy_checks(st: Rows, rnd: Rounding, x: np.ndarray, free: np.ndarray,
         row_state = st.row_states(a, z)
         if direct:  # SciPy's product kernel on the rows' pointers, no copy of the rows
             sums = np.zeros(z - a)
-            _st.csr_matvec(z - a, x.shape[0], m.indptr[a:z + 1], m.indices, m.data, x,
+            sparsetools.csr_matvec(z - a, x.shape[0], m.indptr[a:z + 1], m.indices, m.data, x,
                            sums)
         else:
             sums = m[a:z] @ x

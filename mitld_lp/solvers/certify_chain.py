@@ -24,7 +24,7 @@ from mitld_lp.solvers.rows import gather_ranges, row_columns, row_entries
 from mitld_lp.solvers.topological import level_kernels
 from mitld_lp.solvers.walks import load_walks
 from mitld_lp.util import kernel_loader
-from mitld_lp.util.sparsetools import sparsetools as _st
+from mitld_lp.util.sparsetools import sparsetools
 
 __all__ = ["CHAIN_KERNEL_MIN_LEVELS", "Chain", "RowModel", "full_values", "support_layers", "chain",
            "attracted", "cycling_among", "escapes", "CYCLING_BATCH"]
@@ -421,7 +421,7 @@ class _Singles:
         self.entry_at = np.zeros(self.order.size + 1, dtype=np.int64)
         np.cumsum(np.bincount(self.local, minlength=self.order.size),
                   out=self.entry_at[1:])
-        fits = (_st is not None and self.cols.dtype in (np.int32, np.int64)
+        fits = (sparsetools is not None and self.cols.dtype in (np.int32, np.int64)
                 and self.vals.dtype == np.float64
                 and self.cols.size < np.iinfo(self.cols.dtype).max)
         # entry pointers of the columns' type: SciPy's product sums a level's rows
@@ -451,8 +451,8 @@ class _Singles:
             a, z = int(at[lv]), int(at[lv + 1])
             if self.ptr is not None:  # one compiled call a sum: from 0, in the entries' order
                 down_v, down_w = np.zeros(z - a), np.zeros(z - a)
-                _st.csr_matvec(z - a, n, self.ptr[a:z + 1], self.cols, self.vals, v, down_v)
-                _st.csr_matvec(z - a, n, self.ptr[a:z + 1], self.cols, self.vals, w, down_w)
+                sparsetools.csr_matvec(z - a, n, self.ptr[a:z + 1], self.cols, self.vals, v, down_v)
+                sparsetools.csr_matvec(z - a, n, self.ptr[a:z + 1], self.cols, self.vals, w, down_w)
             else:
                 ea, ez = int(self.entry_at[a]), int(self.entry_at[z])
                 local, cols, vals = self.local[ea:ez] - a, self.cols[ea:ez], self.vals[ea:ez]

@@ -17,7 +17,7 @@ from mitld_lp.solvers.certify_chain import Chain
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.rounding import Rounding, above, below
 from mitld_lp.solvers.rows import row_columns, rows_dot
-from mitld_lp.util.sparsetools import sparsetools as _st
+from mitld_lp.util.sparsetools import sparsetools
 
 __all__ = ["GROWTH", "RETRIES", "Side", "policy_lower", "policy_upper", "scales"]
 
@@ -96,7 +96,7 @@ class _RowsProduct:
     def __init__(self, m: sp.csr_array, rows: np.ndarray) -> None:
         self.m, self.rows = m, rows
         self.cols = self.vals = self.ptr = None
-        if (_st is not None and m.data.dtype == np.float64
+        if (sparsetools is not None and m.data.dtype == np.float64
                 and m.indices.dtype in (np.int32, np.int64)
                 and m.indptr.dtype == m.indices.dtype and rows.size
                 and int(rows.min()) >= 0):
@@ -113,5 +113,5 @@ class _RowsProduct:
                 or not x.flags.c_contiguous):
             return rows_dot(self.m, self.rows, x)
         sums = np.zeros(self.rows.size)
-        _st.csr_matvec(self.rows.size, x.shape[0], self.ptr, self.cols, self.vals, x, sums)
+        sparsetools.csr_matvec(self.rows.size, x.shape[0], self.ptr, self.cols, self.vals, x, sums)
         return sums

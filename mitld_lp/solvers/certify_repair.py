@@ -21,7 +21,7 @@ from mitld_lp.solvers.certify_repair_index import (  # noqa: F401 - Rows re-expo
 )
 from mitld_lp.solvers.rounding import Rounding, above, below
 from mitld_lp.solvers.rows import gather_ranges, row_entries
-from mitld_lp.util.sparsetools import sparsetools as _st
+from mitld_lp.util.sparsetools import sparsetools
 
 __all__ = ["CLOSED_SLICE", "KEEP_READS", "PASSES", "ROUNDS", "SPARSE_LEVEL", "Rows",
            "closed_at_zero", "readers_by_column", "repair_levels"]
@@ -129,7 +129,7 @@ def _need_of(rnd: Rounding, x: np.ndarray, local: np.ndarray, cols: np.ndarray,
     if compiled is not None:
         ptr, all_cols, all_vals = compiled
         sums = np.zeros(rows.size)
-        _st.csr_matvec(rows.size, x.shape[0], ptr, all_cols, all_vals, x, sums)
+        sparsetools.csr_matvec(rows.size, x.shape[0], ptr, all_cols, all_vals, x, sums)
         ext = (np.maximum if upper else np.minimum).reduceat(reached, ptr[:-1] - ptr[0])
     else:
         sums = np.bincount(local, weights=vals * reached, minlength=rows.size)
@@ -175,7 +175,7 @@ class _Walk:
         row_entry = np.zeros(rows.size + 1, dtype=np.int64)
         np.cumsum(np.bincount(self.local, minlength=rows.size), out=row_entry[1:])
         self.entry_at = row_entry[self.row_at]
-        fits = (_st is not None and self.cols.dtype in (np.int32, np.int64)
+        fits = (sparsetools is not None and self.cols.dtype in (np.int32, np.int64)
                 and self.vals.dtype == np.float64 and bool(np.all(np.diff(row_entry) > 0))
                 and self.cols.size < np.iinfo(self.cols.dtype).max)
         self.row_entry = row_entry.astype(self.cols.dtype) if fits else None
@@ -227,7 +227,7 @@ class _Walk:
         ea, ez = int(self.entry_at[a]), int(self.entry_at[z])
         ptr = self.row_entry[ra:rz + 1]
         sums = np.zeros(rz - ra)
-        _st.csr_matvec(rz - ra, x.shape[0], ptr, self.cols, self.vals, x, sums)
+        sparsetools.csr_matvec(rz - ra, x.shape[0], ptr, self.cols, self.vals, x, sums)
         pick = np.maximum if upper else np.minimum
         ext = pick.reduceat(x[self.cols[ea:ez]], ptr[:-1] - ptr[0])
         slack, factor = self.factors(rnd, upper)

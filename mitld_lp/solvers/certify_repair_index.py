@@ -13,7 +13,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mitld_lp.solvers.rows import gather_ranges
-from mitld_lp.util.sparsetools import sparsetools as _st
+from mitld_lp.util.sparsetools import sparsetools
 
 __all__ = ["Rows", "readers_by_column", "stable_order", "state_groups"]
 
@@ -88,7 +88,7 @@ def readers_by_column(st: Rows) -> tuple[np.ndarray, np.ndarray]:
     1000-4's repair, at the certificate's traced peak)."""
     m = st.matrix
     n_rows, n = m.shape
-    if _st is None:  # pragma: no cover - a SciPy without it: SciPy's own transpose
+    if sparsetools is None:  # pragma: no cover - a SciPy without it: SciPy's own transpose
         by_column = sp.csc_array(sp.csr_array(
             (np.ones(m.nnz, dtype=bool), m.indices, m.indptr), shape=m.shape))
         return by_column.indptr, st.row_state()[by_column.indices]
@@ -101,11 +101,11 @@ def readers_by_column(st: Rows) -> tuple[np.ndarray, np.ndarray]:
         # the states' ranges gives each entry's state directly, in the same order (the
         # states ascending, a state's entries in the rows' order), with no row-to-state
         # map of every row and no gather of it at every entry
-        _st.csr_tocsc(st.n_states, n, m.indptr[first].astype(index, copy=False),
+        sparsetools.csr_tocsc(st.n_states, n, m.indptr[first].astype(index, copy=False),
                       m.indices.astype(index, copy=False), np.zeros(m.nnz, dtype=np.int8),
                       col_ptr, col_rows, np.empty(m.nnz, dtype=np.int8))
         return col_ptr, col_rows
-    _st.csr_tocsc(n_rows, n, m.indptr.astype(index, copy=False),
+    sparsetools.csr_tocsc(n_rows, n, m.indptr.astype(index, copy=False),
                   m.indices.astype(index, copy=False), np.zeros(m.nnz, dtype=np.int8),
                   col_ptr, col_rows, np.empty(m.nnz, dtype=np.int8))
     col_state = st.row_state()[col_rows]  # (each row's state made after the transpose)

@@ -34,7 +34,7 @@ import numpy as np
 from mitld_lp.solvers import level_sweeps
 from mitld_lp.solvers.graph import Sense
 from mitld_lp.solvers.rows import gather_ranges
-from mitld_lp.util.sparsetools import sparsetools as _st
+from mitld_lp.util.sparsetools import sparsetools
 
 try:  # the ufunc ``np.clip`` calls on floats: its Python wrappers cost two to three
     # times the clip of a level's scores (some 10 microseconds a level and walk)
@@ -58,7 +58,8 @@ def _flat(sl: SingleLevels, out: np.ndarray) -> np.ndarray | None:
     """``out`` as the flat float64 vector SciPy's compiled CSR/CSC products
     (``scipy.sparse._sparsetools``) read and write in place, or ``None`` where they
     cannot be used (no entry pointers of the walk's index type, a strided ``out``)."""
-    if _st is None or sl.ptr is None or out.dtype != np.float64 or not out.flags.c_contiguous:
+    if (sparsetools is None or sl.ptr is None or out.dtype != np.float64
+            or not out.flags.c_contiguous):
         return None
     return out.reshape(-1)
 
@@ -118,7 +119,7 @@ def _bounds(sl: SingleLevels, runs: list[tuple[int, ...]], rewards: np.ndarray,
     for a, z, ca, cz, ea, ez in runs:
         if flat is not None:  # SciPy's compiled product: one call, the same sums
             sums = np.zeros((cz - ca, k))
-            _st.csr_matvecs(cz - ca, n, k, sl.ptr[ca:cz + 1], sl.cols, sl.vals, flat,
+            sparsetools.csr_matvecs(cz - ca, n, k, sl.ptr[ca:cz + 1], sl.cols, sl.vals, flat,
                             sums.reshape(-1))
         else:
             terms = sl.vals[ea:ez, None] * out[sl.cols[ea:ez]]
@@ -164,7 +165,7 @@ def _values(sl: SingleLevels, runs: list[tuple[int, ...]], to_target: np.ndarray
     for a, z, ca, cz, ea, ez in runs:
         if flat is not None:  # SciPy's compiled product: one call, the same sums
             sums = np.zeros(cz - ca)
-            _st.csr_matvec(cz - ca, n, sl.ptr[ca:cz + 1], sl.cols, sl.vals, flat, sums)
+            sparsetools.csr_matvec(cz - ca, n, sl.ptr[ca:cz + 1], sl.cols, sl.vals, flat, sums)
         else:
             sums = np.bincount(sl.local[ea:ez] - ca, minlength=cz - ca,
                                weights=sl.vals[ea:ez] * out[sl.cols[ea:ez]])
@@ -269,7 +270,7 @@ def _flow(sl: SingleLevels, runs: list[tuple[int, ...]], self_loop: np.ndarray,
             states = sl.states[a:z]
             x[states] /= keep[a - a0:z - a0]
             y = w[ca - ca0:cz - ca0] * x[choice_state[ca - ca0:cz - ca0]]
-            _st.csc_matvec(n, cz - ca, sl.ptr[ca:cz + 1], sl.cols, sl.vals, y, flat)
+            sparsetools.csc_matvec(n, cz - ca, sl.ptr[ca:cz + 1], sl.cols, sl.vals, y, flat)
         return
     entry_state = sl.states[a0:z1][owner[local]]  # whose inflow each entry carries
     entry_weight = w[local]

@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from mitld_lp.solvers.rows import gather_ranges, row_columns
-from mitld_lp.util.sparsetools import sparsetools as _st
+from mitld_lp.util.sparsetools import sparsetools
 
 __all__ = ["flow"]
 
@@ -70,7 +70,7 @@ def _in_place() -> bool:
     if _IN_PLACE is None:
         vec = np.array([1.0, 0.0, 0.0])
         ptr = np.array([0, 1, 2, 2], dtype=np.int32)
-        _st.csc_matvec(3, 3, ptr, np.array([1, 2], dtype=np.int32), np.array([0.5, 0.5]),
+        sparsetools.csc_matvec(3, 3, ptr, np.array([1, 2], dtype=np.int32), np.array([0.5, 0.5]),
                        vec, vec)
         _IN_PLACE = vec.tolist() == [1.0, 0.5, 0.25]
     return _IN_PLACE
@@ -94,7 +94,7 @@ def flow(sl: Any, groups: list[list[Run]], self_loop: np.ndarray, weights: np.nd
     group, if the walk is linear there (module docs): returns whether it was done (else
     ``x`` is untouched and the caller walks).  A group at a time, as the walk gathers
     (``level_batches.GROUP_ENTRIES``): the sweep's arrays are a group's, not the walk's."""
-    if _st is None or sl.ptr is None or not groups or x.dtype != np.float64 \
+    if sparsetools is None or sl.ptr is None or not groups or x.dtype != np.float64 \
             or not x.flags.c_contiguous or not _in_place():
         return False
     first, last = groups[0][0], groups[-1][-1]
@@ -138,7 +138,7 @@ def _sweep(sl: Any, runs: list[Run], one: np.ndarray, x: np.ndarray) -> None:
     vec = np.concatenate([x[states], x])
     # a column a state: vec[t] += P(c, t) vec[s], the state's value read when its column
     # comes (after every column above it has added to it)
-    _st.csc_matvec(vec.size, states.size, ptr, rows, vals, vec, vec)
+    sparsetools.csc_matvec(vec.size, states.size, ptr, rows, vals, vec, vec)
     x[:] = vec[states.size:]
     x[states] = vec[:states.size]
 

@@ -33,7 +33,7 @@ import scipy.sparse as sp
 
 from mitld_lp.solvers.rows import gather_ranges
 from mitld_lp.util import kernel_loader
-from mitld_lp.util.sparsetools import sparsetools as _st
+from mitld_lp.util.sparsetools import sparsetools
 
 __all__ = ["CLASSES", "COMPILED_MIN_ENTRIES", "QuotientRows", "quotient_rows", "row_columns",
            "take_ranges"]
@@ -186,13 +186,13 @@ def _entries(m: sp.csr_array, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     """The columns and values of ``m``'s ``rows``, concatenated in order, by SciPy's
     compiled row gather (as ``m[rows]`` makes them, without the matrix)."""
     idx = m.indptr.dtype
-    if _st is None or m.indices.dtype != idx:  # pragma: no cover - NumPy's gathers
+    if sparsetools is None or m.indices.dtype != idx:  # pragma: no cover - NumPy's gathers
         sel = gather_ranges(m.indptr[rows], m.indptr[rows + 1])
         return m.indices[sel], m.data[sel]
     rows = np.asarray(rows, dtype=idx)
     count = int((m.indptr[rows + 1] - m.indptr[rows]).sum())
     cols, data = np.empty(count, dtype=idx), np.empty(count, dtype=m.data.dtype)
-    _st.csr_row_index(rows.size, rows, m.indptr, m.indices, m.data, cols, data)
+    sparsetools.csr_row_index(rows.size, rows, m.indptr, m.indices, m.data, cols, data)
     return cols, data
 
 

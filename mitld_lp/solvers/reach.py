@@ -13,7 +13,7 @@ import scipy.sparse as sp
 
 from mitld_lp.solvers.rows import gather_ranges
 from mitld_lp.solvers.walks import compiled_walks
-from mitld_lp.util.sparsetools import sparsetools as _st
+from mitld_lp.util.sparsetools import sparsetools
 from mitld_lp.util.traversal import breadth_first_order
 
 __all__ = ["Reversed", "backward_reachable", "reaching_through"]
@@ -87,11 +87,11 @@ class Reversed:
         self.n, self.nnz = n, m
         self.indices = np.empty(m + n, dtype=index)
         self.indptr = np.zeros(n + 2, dtype=index)
-        if starts is not None and (_st is None or m == 0):
+        if starts is not None and (sparsetools is None or m == 0):
             source = np.repeat(np.arange(n, dtype=index), np.diff(starts))
         if starts is None:
             source = np.asarray(source)
-        if _st is None or m == 0:
+        if sparsetools is None or m == 0:
             self._argsorted(source, succ)
         elif starts is not None or bool(np.all(source[1:] >= source[:-1])):
             # the sources sorted (a CSR's rows, each row's entries in their order):
@@ -104,11 +104,11 @@ class Reversed:
             # the values (unread: a byte an edge) one array of zeros, read and written
             # in place (each write a zero over a zero): not a second one (1 B/t)
             zeros = np.zeros(m, dtype=np.int8)
-            _st.csr_tocsc(n, n, rows, succ.astype(index, copy=False), zeros,
+            sparsetools.csr_tocsc(n, n, rows, succ.astype(index, copy=False), zeros,
                           self.indptr[:n + 1], self.indices[:m], zeros)
             del zeros
         else:  # one row an edge, its source the entry's value: the same sort
-            _st.csr_tocsc(m, n, np.arange(m + 1, dtype=index),
+            sparsetools.csr_tocsc(m, n, np.arange(m + 1, dtype=index),
                           succ.astype(index, copy=False), source.astype(index, copy=False),
                           self.indptr[:n + 1], np.empty(m, dtype=index), self.indices[:m])
         self.weights = np.broadcast_to(np.float64(1.0), (m + n,))

@@ -12,7 +12,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 
-from mitld_lp.util.sparsetools import sparsetools as _st
+from mitld_lp.util.sparsetools import sparsetools
 
 __all__ = ["CSRRows", "gather_ranges", "off_diagonal_entries", "row_columns", "row_entries",
            "rows_dot"]
@@ -89,14 +89,14 @@ def row_columns(matrix: sp.csr_array, rows: np.ndarray) -> tuple[np.ndarray, np.
     lo, hi = ptr[rows], ptr[rows + 1]
     # (``ptr[rows + 1]`` refused a row past the last; a negative row, which NumPy's
     # indexing would wrap, is left to NumPy's gathers, not to the compiled loop)
-    if (_st is None or ptr.dtype != idx.dtype or idx.dtype not in (np.int32, np.int64)
+    if (sparsetools is None or ptr.dtype != idx.dtype or idx.dtype not in (np.int32, np.int64)
             or (rows.size and int(rows.min()) < 0)):
         entries = gather_ranges(lo, hi)
         return idx[entries], matrix.data[entries]
     total = int((hi - lo).sum())
     cols = np.empty(total, dtype=idx.dtype)
     vals = np.empty(total, dtype=matrix.data.dtype)
-    _st.csr_row_index(rows.size, rows.astype(idx.dtype, copy=False), ptr, idx,
+    sparsetools.csr_row_index(rows.size, rows.astype(idx.dtype, copy=False), ptr, idx,
                       matrix.data, cols, vals)
     return cols, vals
 

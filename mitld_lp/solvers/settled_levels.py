@@ -23,7 +23,7 @@ from mitld_lp.solvers.graph import Blocks, Sense, segmented_argmax
 from mitld_lp.solvers.reach import backward_reachable
 from mitld_lp.solvers.reduced import Quotient
 from mitld_lp.solvers.topological import TIE, SingleLevels
-from mitld_lp.util.sparsetools import sparsetools as _st
+from mitld_lp.util.sparsetools import sparsetools
 
 __all__ = ["SETTLED_BY_BOUNDS", "settled_by_bounds"]
 
@@ -66,9 +66,9 @@ def settled_by_bounds(q: Quotient, blk: Blocks, singles: SingleLevels,
     sl = singles
     m = sl.choices.size
     ptr, local, cols, vals = sl.entries()  # (a copy for the compiled walks, freed here)
-    if ptr is not None and _st is not None:
+    if ptr is not None and sparsetools is not None:
         sums = np.zeros(m)
-        _st.csr_matvec(m, n, ptr, cols, vals, candidate, sums)
+        sparsetools.csr_matvec(m, n, ptr, cols, vals, candidate, sums)
     else:
         sums = np.bincount(local, weights=vals * candidate[cols], minlength=m)
     reward = q.to_target[sl.choices]
