@@ -25,7 +25,7 @@ from test_cert_fast_exact import model_of_rows
 
 from mitld_lp.mdp import MDP
 from mitld_lp.solvers import certify as C
-from mitld_lp.solvers import certify_chain, certify_compiled
+from mitld_lp.solvers import certify_blocks, certify_chain, certify_compiled
 from mitld_lp.solvers.analysis import may_cycle
 from mitld_lp.solvers.rounding import rounding
 from mitld_lp.testing.exact import chain_values
@@ -118,6 +118,8 @@ def paid_kernels(monkeypatch: pytest.MonkeyPatch, compiled: bool) -> None:
     monkeypatch.setattr(certify_compiled, "COMPILED_CHECK_MIN_ROWS", 0)
     monkeypatch.setattr(certify_chain, "kernel_loader", fake)
     monkeypatch.setattr(certify_chain, "CHAIN_KERNEL_MIN_LEVELS", 0)
+    # the chain's blocks' cache look-up (cert-86), fresh: never the fake's answer kept
+    monkeypatch.setattr(certify_blocks, "_BLOCKS_WARM", [compiled])
 
 
 N = 5

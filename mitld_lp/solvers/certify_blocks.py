@@ -12,7 +12,25 @@ from mitld_lp.solvers import certify_compiled
 from mitld_lp.solvers.graph import Blocks
 from mitld_lp.solvers.result import read_only
 
-__all__ = ["compiled_chain_blocks"]
+__all__ = ["BLOCKS_KERNEL", "blocks_cached", "compiled_chain_blocks"]
+
+BLOCKS_KERNEL = ("mitld_lp.solvers.certify_kernels", "chain_blocks")
+"""The chain's blocks' kernel (:func:`compiled_chain_blocks`), asked for its cache file
+once a process (:func:`blocks_cached`)."""
+
+_BLOCKS_WARM: list[bool] = []  # whether BLOCKS_KERNEL has a cache file, once a process
+
+
+def blocks_cached() -> bool:
+    """Whether the kernel loader would link :data:`BLOCKS_KERNEL` from its cache
+    (:func:`~mitld_lp.util.kernel_loader.module_cached`, through the loader
+    :mod:`~mitld_lp.solvers.certify_compiled` holds), looked up once a process, as the
+    sibling gates do (:func:`~mitld_lp.solvers.certify_compiled.rounds_cached`): a cold
+    cache never makes a certificate pay numba's compile."""
+    if not _BLOCKS_WARM:
+        _BLOCKS_WARM.append(bool(
+            certify_compiled.kernel_loader.module_cached(*BLOCKS_KERNEL)))
+    return _BLOCKS_WARM[0]
 
 
 def compiled_chain_blocks(comp: np.ndarray, level: np.ndarray, self_loop: np.ndarray,
@@ -24,12 +42,14 @@ def compiled_chain_blocks(comp: np.ndarray, level: np.ndarray, self_loop: np.nda
     non-negative at each of ``comp`` (the caller's check, :func:`~mitld_lp.solvers.
     certify_chain._solve`'s layers).  None where the NumPy calls run instead: fewer than
     :data:`~mitld_lp.solvers.certify_compiled.COMPILED_CHECK_MIN_ROWS` states, no
-    compiled kernel loaded yet in this process, a negative id, or ids past an int32."""
+    compiled kernel loaded yet in this process, the kernel not in the loader's cache
+    (:func:`blocks_cached`), a negative id, or ids past an int32."""
     n = int(comp.shape[0])
     # the certificate's gates as :mod:`~mitld_lp.solvers.certify_compiled` holds them
     # (its size and its loader: one switch for every compiled path of the certificate)
     if (n < certify_compiled.COMPILED_CHECK_MIN_ROWS
             or not certify_compiled.kernel_loader.compiled_paid()
+            or not blocks_cached()
             or comp.dtype.kind not in "iu" or level.dtype.kind not in "iu"
             or int(comp.min()) < 0 or int(comp.max()) >= level.shape[0]
             or level.shape[0] >= 2**31 - 1):
