@@ -47,20 +47,19 @@ def dfs_sets(states, rows, indptr, indices, data, target, never, sure):  # pragm
     stack = np.empty(n, dtype=np.int32)  # the states of the components not yet done
     frame = np.empty(n, dtype=np.int32)  # the search's path: its states
     at = np.empty(n, dtype=np.int32)  # and the next entry each reads
-    count = 0
-    top = 0
+    count = top = depth = 0
     for root in range(n):
-        if order[root] >= 0:
-            continue
-        order[root] = count
-        low[root] = count
-        count += 1
-        stack[top] = root
-        top += 1
-        frame[0] = root
-        at[0] = indptr[row[root]] if row[root] >= 0 else 0
-        depth = 1
-        while depth > 0:
+        push = root if order[root] < 0 else -1  # the state to enter next (-1: none)
+        while push >= 0 or depth > 0:
+            if push >= 0:  # entered: numbered, stacked, its first entry to read
+                order[push] = low[push] = count
+                count += 1
+                stack[top] = push
+                top += 1
+                frame[depth] = push
+                at[depth] = indptr[row[push]] if row[push] >= 0 else 0
+                depth += 1
+                push = -1
             v = frame[depth - 1]
             r = row[v]
             e = at[depth - 1]
@@ -71,14 +70,7 @@ def dfs_sets(states, rows, indptr, indices, data, target, never, sure):  # pragm
                     w = indices[e]
                     if order[w] < 0:
                         at[depth - 1] = e + 1
-                        order[w] = count
-                        low[w] = count
-                        count += 1
-                        stack[top] = w
-                        top += 1
-                        frame[depth] = w
-                        at[depth] = indptr[row[w]] if row[w] >= 0 else 0
-                        depth += 1
+                        push = w
                         went = True
                         break
                     if low[w] >= 0 and order[w] < low[v]:  # on the stack
