@@ -26,8 +26,8 @@ N = 10
 CHOICES = (((1, 0.5), (-1, 0.497), 0.0018, 0.0012),
            ((2, 0.3), (-3, 0.6976), 0.0015, 0.0009))
 EXACT = {Sense.MAX: (0.625, 0.4), Sense.MIN: (0.6, 0.375)}
-HELPERS = ("_pack", "_after_sweep", "_over", "_plain", "_watched", "_verifying", "_verifying2",
-           "gauss_seidel")
+HELPERS = ("_pack", "_after_sweep", "_over", "_plain", "_watched", "_verifying", "verifying2",
+           "watched2", "gauss_seidel")
 
 
 def _ring() -> tuple[sp.csr_array, np.ndarray, np.ndarray]:

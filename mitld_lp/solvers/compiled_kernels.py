@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from mitld_lp.solvers.sweep_four import plain4, verifying4, watched4
+from mitld_lp.solvers.sweep_two import plain2, verifying2, watched2
 from mitld_lp.util import kernel_loader
 
 # numba's cached machine code run without importing numba; numba itself on a miss
@@ -86,37 +87,6 @@ def update(indptr, indices, data, starts, leave, exits, local, s, best, acc,
     keep(local, s, best, k)
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def update2(indptr, indices, data, starts, leave, exits, local, s,
-            minimise):  # pragma: no cover - compiled
-    lo_best = np.inf if minimise else -np.inf
-    hi_best = lo_best
-    for c in range(starts[s], starts[s + 1]):
-        lo = exits[c, 0]
-        hi = exits[c, 1]
-        for e in range(indptr[c], indptr[c + 1]):
-            t = indices[e]
-            if t != s:
-                w = data[e]
-                lo += w * local[t, 0]
-                hi += w * local[t, 1]
-        lv = leave[c]
-        if lv != 1.0:  # most choices have no self-loop: x / 1.0 is x, and no divide
-            if lv > 0.0:
-                lo /= lv
-                hi /= lv
-            else:
-                lo = 0.0
-                hi = 0.0
-        if minimise:
-            lo_best = min(lo_best, lo)
-            hi_best = min(hi_best, hi)
-        else:
-            lo_best = max(lo_best, lo)
-            hi_best = max(hi_best, hi)
-    local[s, 0] = max(local[s, 0], min(max(lo_best, 0.0), 1.0))
-    local[s, 1] = min(local[s, 1], min(max(hi_best, 0.0), 1.0))
-
-@numba.njit(cache=True, nogil=True, inline="always")
 def checked(indptr, indices, data, starts, leave, exits, local, guess, s, best, acc,
             minimise, track, k):  # pragma: no cover - compiled
     """:func:`update` of ``local`` in a verifying sweep, and in the same pass over the
@@ -152,89 +122,6 @@ def checked(indptr, indices, data, starts, leave, exits, local, guess, s, best, 
             track[OFF + 3 * k + j] = 3.0  # beyond the other side's proven bound
 
 
-@numba.njit(cache=True, nogil=True)
-def _verifying2(indptr, indices, data, starts, leave, exits, work, order, minimise,
-                track):  # pragma: no cover - compiled
-    """:func:`_verifying` for one model (two columns), its sums in scalars, on the
-    packed rows: ``work[t]`` holds ``t``'s lower and upper bound and its lower and upper
-    guess side by side.  The guesses' trial and failure flags (``track``'s) are held in
-    locals for the sweep and written back at its end: read and written in ``track``
-    state by state, every store to it could alias ``work``'s rows, so each state's
-    entries were read again from memory; the same updates in the same order (a flag
-    set mid-sweep stops its guess's updates from the next state on, as it did), the
-    same bits, the sweep on QVBS ``zeroconf`` 1000-4's block 7.1-8.0 -> 2.5-3.2 ms."""
-    n = work.shape[0]
-    lower_on = track[OFF + 6]  # the lower guess's trial (1: on trial, 3: crossed)
-    upper_on = track[OFF + 7]
-    lower_fell = track[OFF + 10]  # 1: a lower guess fell in this sweep
-    upper_rose = track[OFF + 11]
-    for i in range(n):
-        s = order[i]
-        lo_best = np.inf if minimise else -np.inf
-        hi_best = lo_best
-        gl_best = lo_best
-        gh_best = lo_best
-        for c in range(starts[s], starts[s + 1]):
-            lo = exits[c, 0]
-            hi = exits[c, 1]
-            gl = lo
-            gh = hi
-            first = indptr[c]
-            last = indptr[c + 1]
-            for e in range(first, last):
-                t = indices[e]
-                if t != s:
-                    w = data[e]
-                    lo += w * work[t, 0]
-                    hi += w * work[t, 1]
-                    gl += w * work[t, 2]
-                    gh += w * work[t, 3]
-            lv = leave[c]
-            if lv != 1.0:  # x / 1.0 is x: the same bits without the divides
-                if lv > 0.0:
-                    lo /= lv
-                    hi /= lv
-                    gl /= lv
-                    gh /= lv
-                else:
-                    lo = hi = gl = gh = 0.0
-            wide = (last - first + 8) * 2.0**-52
-            gl *= 1.0 - wide
-            gh *= 1.0 + wide
-            if minimise:
-                lo_best = min(lo_best, lo)
-                hi_best = min(hi_best, hi)
-                gl_best = min(gl_best, gl)
-                gh_best = min(gh_best, gh)
-            else:
-                lo_best = max(lo_best, lo)
-                hi_best = max(hi_best, hi)
-                gl_best = max(gl_best, gl)
-                gh_best = max(gh_best, gh)
-        low = max(work[s, 0], min(max(lo_best, 0.0), 1.0))
-        high = min(work[s, 1], min(max(hi_best, 0.0), 1.0))
-        work[s, 0] = low
-        work[s, 1] = high
-        if lower_on == 1.0:
-            val = min(max(gl_best, 0.0), 1.0)
-            if val < work[s, 2]:
-                lower_fell = 1.0
-            work[s, 2] = val
-            if val > high:
-                lower_on = 3.0
-        if upper_on == 1.0:
-            val = min(max(gh_best, 0.0), 1.0)
-            if val > work[s, 3]:
-                upper_rose = 1.0
-            work[s, 3] = val
-            if val < low:
-                upper_on = 3.0
-    track[OFF + 6] = lower_on
-    track[OFF + 7] = upper_on
-    track[OFF + 10] = lower_fell
-    track[OFF + 11] = upper_rose
-
-
 @numba.njit(cache=True, nogil=True, inline="always")
 def threshold(low, tol, precision, floor):  # pragma: no cover - compiled
     """The gap below which a state of lower bound ``low`` is known (kernels.thresholds)."""
@@ -259,60 +146,40 @@ def _over(local, k, tol, precision, floor):  # pragma: no cover - compiled
 
 @numba.njit(cache=True, nogil=True)
 def _plain(indptr, indices, data, starts, leave, exits, local, order, best,
-           acc, minimise):  # pragma: no cover - compiled
-    """One sweep of ``local`` through the states in ``order``."""
+           acc, minimise, tol, precision, floor):  # pragma: no cover
+    """One sweep of ``local`` through the states in ``order``; for one model the
+    largest gap over its threshold read as each state is set (:func:`_watched`), -1 for
+    more."""
     n, k = local.shape
+    if k == 2:  # one model: its sums in scalars (sweep_two)
+        return plain2(indptr, indices, data, starts, leave, exits, local, order,
+                      minimise, tol, precision, floor)
     if k == 4:  # two models: their sums in scalars (sweep_four)
         plain4(indptr, indices, data, starts, leave, exits, local, order, minimise)
-        return
+        return -1.0
     for i in range(n):
-        s = order[i]
-        if k == 2:
-            update2(indptr, indices, data, starts, leave, exits, local, s, minimise)
-        else:
-            update(indptr, indices, data, starts, leave, exits, local, s, best, acc,
-                   minimise)
+        update(indptr, indices, data, starts, leave, exits, local, order[i], best, acc,
+               minimise)
+    return -1.0
 
 
 @numba.njit(cache=True, nogil=True)
 def _watched(indptr, indices, data, starts, leave, exits, local, order, best,
-             acc, minimise, guess, track, tol, precision, floor):  # pragma: no cover
+             acc, minimise, guess, track, tol, precision, floor):  # pragma: no cover - compiled
     """:func:`_plain`, each bound's change written into ``guess`` and each column's
     largest change into ``track``; returns the largest gap over its threshold after the
-    sweep (:func:`_over`) for one model, -1 for more (the caller reads it then).
+    sweep (:func:`_over`) for one or two models, -1 for more (the caller reads it then).
 
-    One model (two columns) runs on scalars: a state's old bounds held in registers, not
-    written into ``guess`` and read back, its gap read as it is set (a state is updated
-    once a sweep and nothing after the sweep moves a bound while watching, so the
-    largest of those is :func:`_over`'s, the same maximum of the same ratios): QVBS
-    ``zeroconf`` 1000-4's block of 213,268 states, whose 39 sweeps all watch, 13.4 ->
-    10.0 ms a sweep, the bounds the same to the bit."""
+    One model (two columns) runs on scalars (sweep_two): a state's old bounds held in
+    registers, not written into ``guess`` and read back, its gap read as it is set (a
+    state is updated once a sweep and nothing after the sweep moves a bound while
+    watching, so the largest of those is :func:`_over`'s, the same maximum of the same
+    ratios): QVBS ``zeroconf`` 1000-4's block of 213,268 states, whose 39 sweeps all
+    watch, 13.4 -> 10.0 ms a sweep, the bounds the same to the bit."""
     n, k = local.shape
     if k == 2:
-        m0 = track[OFF + 8]  # OFF + 4 k + j, k = 2: this sweep's largest changes
-        m1 = track[OFF + 9]
-        over = 0.0
-        for i in range(n):
-            s = order[i]
-            a = local[s, 0]
-            b = local[s, 1]
-            update2(indptr, indices, data, starts, leave, exits, local, s, minimise)
-            lo = local[s, 0]
-            hi = local[s, 1]
-            d0 = abs(lo - a)
-            d1 = abs(hi - b)
-            guess[s, 0] = d0
-            guess[s, 1] = d1
-            if d0 > m0:
-                m0 = d0
-            if d1 > m1:
-                m1 = d1
-            r = (hi - lo) / threshold(lo, tol, precision, floor)
-            if r > over:
-                over = r
-        track[OFF + 8] = m0
-        track[OFF + 9] = m1
-        return over
+        return watched2(indptr, indices, data, starts, leave, exits, local, order,
+                        minimise, guess, track, tol, precision, floor)
     if k == 4:
         return watched4(indptr, indices, data, starts, leave, exits, local, order,
                         minimise, guess, track, tol, precision, floor)
@@ -320,11 +187,8 @@ def _watched(indptr, indices, data, starts, leave, exits, local, order, best,
         s = order[i]
         for j in range(k):
             guess[s, j] = local[s, j]
-        if k == 2:
-            update2(indptr, indices, data, starts, leave, exits, local, s, minimise)
-        else:
-            update(indptr, indices, data, starts, leave, exits, local, s, best, acc,
-                   minimise)
+        update(indptr, indices, data, starts, leave, exits, local, s, best, acc,
+               minimise)
         for j in range(k):
             d = abs(local[s, j] - guess[s, j])
             guess[s, j] = d
@@ -335,24 +199,26 @@ def _watched(indptr, indices, data, starts, leave, exits, local, order, best,
 
 @numba.njit(cache=True, nogil=True)
 def _verifying(indptr, indices, data, starts, leave, exits, work, order, best,
-               acc, minimise, track):  # pragma: no cover - compiled
+               acc, minimise, track, tol, precision, floor):  # pragma: no cover - compiled
     """One sweep of the proven bounds and of the guesses on trial (:func:`checked`),
     both packed into ``work``'s rows (the bounds in its first ``k`` columns, the
     guesses in the next ``k``): an entry reads one row where two arrays cost two reads
-    far apart in memory, the verifying sweep's price 2.4 plain ones before."""
+    far apart in memory, the verifying sweep's price 2.4 plain ones before.  For one
+    model the largest gap over its threshold of the bounds as swept (sweep_two), -1
+    for more."""
     n, kk = work.shape
     k = kk // 2
     if k == 2:
-        _verifying2(indptr, indices, data, starts, leave, exits, work, order, minimise,
-                    track)
-        return
+        return verifying2(indptr, indices, data, starts, leave, exits, work, order,
+                          minimise, track, tol, precision, floor)
     if k == 4:
         verifying4(indptr, indices, data, starts, leave, exits, work, order, minimise,
                    track)
-        return
+        return -1.0
     for i in range(n):
         checked(indptr, indices, data, starts, leave, exits, work[:, :k], work[:, k:],
                 order[i], best, acc, minimise, track, k)
+    return -1.0
 
 
 @numba.njit(cache=True, nogil=True)
@@ -394,33 +260,36 @@ def gauss_seidel(indptr, indices, data, starts, leave, exits, local, order, max_
     packed = False
     whole = order.shape[0] == n  # every state once a sweep: a watched sweep reads the gap
     while done < max_sweeps:
-        watched = -1.0  # the gap over its threshold read by a watched sweep (-1: not)
         for j in range(k):
             track[OFF + 4 * k + j] = 0.0
             track[OFF + 5 * k + j] = 0.0
+        proven = track[3]
         if not optimistic:
-            _plain(indptr, indices, data, starts, leave, exits, local, order, best, acc,
-                   minimise)
+            swept = _plain(indptr, indices, data, starts, leave, exits, local, order,
+                           best, acc, minimise, tol, precision, floor)
         elif track[0] == 1.0:
             if not packed:
                 if work.shape[0] != n:
                     work = np.empty((n, 2 * k))
                 _pack(local, guess, work, np.bool_(False))  # bool_: not a literal type
                 packed = True
-            _verifying(indptr, indices, data, starts, leave, exits, work, order, best,
-                       acc, minimise, track)
+            swept = _verifying(indptr, indices, data, starts, leave, exits, work, order,
+                               best, acc, minimise, track, tol, precision, floor)
         else:
-            watched = _watched(indptr, indices, data, starts, leave, exits, local, order,
-                               best, acc, minimise, guess, track, tol, precision, floor)
-            if not whole:
-                watched = -1.0
+            swept = _watched(indptr, indices, data, starts, leave, exits, local, order,
+                             best, acc, minimise, guess, track, tol, precision, floor)
+        # the gap over its threshold read by the sweep (-1: not), good when every state
+        # was swept once: each is set once a sweep, and nothing after it moves a bound
+        # but a guess proven (then read again)
+        watched = swept if whole else -1.0
         done += 1
         # one layout and no literal for the helpers below, so each is compiled once (a
         # slice work[:, :k] is typed apart from a C array, a constant 0 or True apart
         # from an int64 or bool): the packed rows are passed whole, the guesses at k
         if packed:
             _after_sweep(work, work, k, track, k, tol, precision, floor)
-            over = _over(work, k, tol, precision, floor)
+            over = (watched if watched >= 0.0 and track[3] == proven
+                    else _over(work, k, tol, precision, floor))
             if track[0] != 1.0:  # the verification is over: watched sweeps next
                 _pack(local, guess, work, np.bool_(True))
                 packed = False
