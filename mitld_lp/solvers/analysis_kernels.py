@@ -31,7 +31,7 @@ from mitld_lp.util import kernel_loader
 
 numba = kernel_loader.lazy_numba(globals())
 
-__all__ = ["MAX_SEEDS", "components_reach", "seed_columns", "warm_up"]
+__all__ = ["MAX_SEEDS", "component_levels", "components_reach", "seed_columns", "warm_up"]
 
 MAX_SEEDS = 8
 """The most seed sets one call reads (a bit each of a byte)."""
@@ -177,6 +177,48 @@ def components_reach(indptr, indices, row_groups, seeds):  # pragma: no cover - 
             crowd[n_crowd] = s
             n_crowd += 1
     return n_comp, label, reach, crowd[:n_crowd], ptr, succ[:pos]
+
+
+@numba.njit(cache=True, nogil=True)
+def component_levels(indptr, indices, row_groups, label, n_comp):  # pragma: no cover
+    """``(level, ok)``: each component's level in the state graph of the choice matrix
+    ``indptr, indices`` (state ``s``'s choices are rows ``row_groups[s]:row_groups[s+1]``)
+    whose states lie in the components ``label`` (int32, ``n_comp`` of them): 0 for a
+    component without an edge to another, else one more than the highest level of those
+    it has an edge to, :func:`~mitld_lp.solvers.graph.levels`' longest path to a sink.
+    The components numbered as Tarjan's search completes them (:func:`components_reach`:
+    every edge between two runs from a higher id to a lower), each is final when the
+    components below it are: one pass over the components in increasing order, their
+    states grouped by a counting sort, each state's entries read once (no state graph,
+    no condensation, no round a level).  ``ok`` False where an edge runs up (not such a
+    numbering): the levels are then not read."""
+    n = row_groups.shape[0] - 1
+    start = np.zeros(n_comp + 1, dtype=np.int64)
+    for s in range(n):
+        start[label[s] + 1] += 1
+    for c in range(n_comp):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    members = np.empty(n, dtype=np.int32)
+    for s in range(n):
+        c = label[s]
+        members[fill[c]] = s
+        fill[c] += 1
+    level = np.zeros(n_comp, dtype=np.int64)
+    for c in range(n_comp):
+        lv = 0
+        for i in range(start[c], start[c + 1]):
+            s = members[i]
+            for e in range(indptr[row_groups[s]], indptr[row_groups[s + 1]]):
+                d = label[indices[e]]
+                if d == c:
+                    continue
+                if d > c:  # not final yet: not Tarjan's numbering
+                    return level, False
+                if level[d] >= lv:
+                    lv = level[d] + 1
+        level[c] = lv
+    return level, True
 
 
 def seed_columns(seeds: np.ndarray) -> np.ndarray:
