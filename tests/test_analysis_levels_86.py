@@ -128,3 +128,87 @@ def test_fused_later_gives_the_brute_levels(monkeypatch, compiled: bool, forward
     level = found.later()
     assert level.dtype == np.int64
     assert np.array_equal(level[found.component], _brute_levels(m, groups))
+
+
+def _post_order(m: sp.csr_array, groups: np.ndarray) -> list[int]:
+    """Each state's place in the order a recursive depth-first search leaves the states
+    (roots increasing, each state's distinct successors from the largest down)."""
+    import sys
+
+    n = groups.size - 1
+    succ = [sorted({int(t) for r in range(groups[s], groups[s + 1])
+                    for t in m.indices[m.indptr[r]:m.indptr[r + 1]]}, reverse=True)
+            for s in range(n)]
+    place = [-1] * n
+    seen = [False] * n
+    count = [0]
+
+    def visit(v: int) -> None:
+        seen[v] = True
+        for w in succ[v]:
+            if not seen[w]:
+                visit(w)
+        place[v] = count[0]
+        count[0] += 1
+
+    limit = sys.getrecursionlimit()
+    sys.setrecursionlimit(max(limit, 4 * n + 100))
+    try:
+        for root in range(n):
+            if not seen[root]:
+                visit(root)
+    finally:
+        sys.setrecursionlimit(limit)
+    return place
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_acyclic_graph_numbered_as_the_search_leaves_it(seed: int) -> None:
+    """A graph without a cycle but self-loops (a deadline's shape): each state its own
+    component, numbered by the post-order of a recursive search written here, reach by
+    the brute fixpoint; one edge back (a 2-cycle) makes the same partition as SciPy's."""
+    rng = np.random.default_rng(8650 + seed)
+    m, groups = _matrix(rng, int(rng.integers(2, 400)), 3, True)
+    n = groups.size - 1
+    seeds = rng.random((n, 2)) < 0.05
+    n_comp, label, reach, crowd, _, _ = REACH(m.indptr, m.indices, groups,
+                                              analysis_kernels.seed_columns(seeds))
+    assert int(n_comp) == n and crowd.size == 0
+    assert label.tolist() == _post_order(m, groups)
+    succ = [{int(t) for r in range(groups[s], groups[s + 1])
+             for t in m.indices[m.indptr[r]:m.indptr[r + 1]]} for s in range(n)]
+    for j in range(2):
+        found = seeds[:, j].copy()
+        changed = True
+        while changed:
+            changed = False
+            for s in range(n):
+                if not found[s] and any(found[t] for t in succ[s]):
+                    found[s] = changed = True
+        assert np.array_equal(reach[:, j], found)
+    # a choice of t back to s, where s has an entry forward to t: a 2-cycle
+    src = [s for s in range(n) if any(t > s for t in succ[s])]
+    if not src:
+        return
+    s = src[-1]
+    t = max(t for t in succ[s] if t > s)
+    back = sp.vstack([m[:int(groups[t + 1])], sp.csr_array(([1.0], ([0], [s])), shape=(1, n)),
+                      m[int(groups[t + 1]):]]).tocsr()
+    back.indices = back.indices.astype(np.int32)
+    back.indptr = back.indptr.astype(np.int32)
+    g2 = groups.copy()
+    g2.flags.writeable = True
+    g2[t + 1:] += 1
+    g2.flags.writeable = False
+    n_comp2, label2, _, crowd2, _, _ = REACH(back.indptr, back.indices, g2,
+                                             np.zeros((n, 1), dtype=bool))
+    rows = [a for a in range(n) for _ in succ[a]] + [t]
+    cols = [b for a in range(n) for b in succ[a]] + [s]
+    graph = sp.csr_array((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    n_want, want = connected_components(graph, directed=True, connection="strong")
+    assert int(n_comp2) == n_want < n
+    pairs = set(zip(label2.tolist(), want.tolist(), strict=True))
+    assert len(pairs) == n_want
+    assert crowd2.size >= 2 and s in crowd2.tolist() and t in crowd2.tolist()
+    level, ok = LEVELS(back.indptr, back.indices, g2, label2, int(n_comp2))
+    assert ok  # every edge between components runs down: Tarjan's numbering

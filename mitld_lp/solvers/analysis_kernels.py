@@ -95,8 +95,12 @@ def components_reach(indptr, indices, row_groups, seeds):  # pragma: no cover - 
     index = 1
     # the next completed component's rindex (its label n - c): above every entered
     # state's index (at most the states entered and not completed, n - n_components)
-    c = n
-    for root in range(n):
+    c = _acyclic(ptr, succ, acc, rindex, comp_bits, stack, work_v, work_at, n)
+    if c < 0:  # a cycle: Tarjan's search, from nothing
+        rindex[:] = 0
+        comp_bits[:] = 0
+        c = n
+    for root in range(n):  # nothing left to enter where the graph is acyclic
         if rindex[root]:
             continue
         v = root
@@ -219,6 +223,63 @@ def component_levels(indptr, indices, row_groups, label, n_comp):  # pragma: no 
                     lv = level[d] + 1
         level[c] = lv
     return level, True
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _acyclic(ptr, succ, acc, rindex, comp_bits, bits, work_v, work_at,
+             n):  # pragma: no cover - compiled
+    """:func:`components_reach`'s search where the state graph has no cycle but
+    self-loops (a deadline's clock: QVBS firewire_dl 3-600, zeroconf_dl 1000-1-30): each
+    state is a component of its own, completed as the search leaves it, so a plain
+    depth-first search in the same order (roots increasing, successors from the last)
+    numbers them as Tarjan's does and ORs the same bits, without the low links or the
+    stack of entered states.  Writes ``rindex`` and ``comp_bits`` as Tarjan's search
+    leaves them (a completed state ``v``: ``rindex[v] = c``, its bits at ``n - c``;
+    ``-1`` marks a state on the path) and returns the last ``c``; ``-1`` as soon as an
+    edge enters a state on the path (a cycle), the arrays then to be cleared.  ``bits``
+    holds the bits found so far at each depth (scratch of ``n``)."""
+    c = n
+    for root in range(n):
+        if rindex[root]:
+            continue
+        rindex[root] = -1
+        work_v[0] = root
+        work_at[0] = ptr[root + 1] - 1
+        bits[0] = acc[root]
+        depth = 1
+        while depth:
+            v = work_v[depth - 1]
+            at = work_at[depth - 1]
+            lo = ptr[v]
+            b = bits[depth - 1]
+            entering = False
+            while at >= lo:
+                w = succ[at]
+                at -= 1
+                rw = rindex[w]
+                if rw == 0:
+                    entering = True
+                    break
+                if rw > 0:  # completed: its bits are final
+                    b |= comp_bits[n - rw]
+                elif w != v:  # on the path: a cycle
+                    return -1
+            if entering:
+                work_at[depth - 1] = at
+                bits[depth - 1] = b
+                rindex[w] = -1
+                work_v[depth] = w
+                work_at[depth] = ptr[w + 1] - 1
+                bits[depth] = acc[w]
+                depth += 1
+                continue
+            rindex[v] = c
+            comp_bits[n - c] = b
+            c -= 1
+            depth -= 1
+            if depth:
+                bits[depth - 1] |= b
+    return c
 
 
 def seed_columns(seeds: np.ndarray) -> np.ndarray:
