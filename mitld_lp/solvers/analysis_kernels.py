@@ -249,23 +249,20 @@ def _acyclic(ptr, succ, acc, rindex, comp_bits, bits, work_v, work_at,
         depth = 1
         while depth:
             v = work_v[depth - 1]
-            at = work_at[depth - 1]
-            lo = ptr[v]
             b = bits[depth - 1]
-            entering = False
-            while at >= lo:
-                w = succ[at]
-                at -= 1
-                rw = rindex[w]
-                if rw == 0:
-                    entering = True
+            w = -1  # the next state to enter, if any
+            for at in range(work_at[depth - 1], ptr[v] - 1, -1):
+                x = succ[at]
+                rx = rindex[x]
+                if rx > 0:  # completed: its bits are final
+                    b |= comp_bits[n - rx]
+                elif rx == 0:
+                    w = x
+                    work_at[depth - 1] = at - 1
                     break
-                if rw > 0:  # completed: its bits are final
-                    b |= comp_bits[n - rw]
-                elif w != v:  # on the path: a cycle
+                elif x != v:  # on the path: a cycle
                     return -1
-            if entering:
-                work_at[depth - 1] = at
+            if w >= 0:
                 bits[depth - 1] = b
                 rindex[w] = -1
                 work_v[depth] = w
