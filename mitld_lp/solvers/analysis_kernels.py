@@ -54,7 +54,9 @@ def components_reach(indptr, indices, row_groups, seeds):  # pragma: no cover - 
     as the search reaches it, on QVBS csma 4-2).  Pearce's one-array form
     of Tarjan's search (as SciPy's): ``rindex`` holds a state's index, then its low
     link, then, completed, ``n -`` its component, so an edge reads one number of
-    its head."""
+    its head.  A plain search in the same order comes first (:func:`_acyclic`): where
+    the graph has no cycle but self-loops it gives the same numbering and bits, else it
+    stops at its first cycle and Tarjan's search runs."""
     n = row_groups.shape[0] - 1
     ptr = np.empty(n + 1, dtype=np.int32)
     succ = np.empty(indptr[row_groups[n]] - indptr[row_groups[0]], dtype=np.int32)
