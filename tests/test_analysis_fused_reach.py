@@ -158,7 +158,8 @@ def _product(rng: np.random.Generator, n: int) -> tuple[MDP, np.ndarray, np.ndar
 def _fused_forced(monkeypatch: pytest.MonkeyPatch, taken: list) -> None:
     """The fused route taken whatever the load and cache (the kernel run as Python)."""
     monkeypatch.setattr(analysis_reach, "_kernels", lambda: SimpleNamespace(
-        components_reach=KERNEL, seed_columns=analysis_kernels.seed_columns))
+        components_reach=KERNEL, seed_columns=analysis_kernels.seed_columns,
+        component_levels=analysis_kernels.component_levels.py_func))
     inner = analysis_reach.fused_components_reaching
 
     def spy(*args, **kwargs):

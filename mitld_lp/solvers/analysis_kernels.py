@@ -31,7 +31,7 @@ from mitld_lp.util import kernel_loader
 
 numba = kernel_loader.lazy_numba(globals())
 
-__all__ = ["MAX_SEEDS", "components_reach", "seed_columns", "warm_up"]
+__all__ = ["MAX_SEEDS", "component_levels", "components_reach", "seed_columns", "warm_up"]
 
 MAX_SEEDS = 8
 """The most seed sets one call reads (a bit each of a byte)."""
@@ -54,7 +54,9 @@ def components_reach(indptr, indices, row_groups, seeds):  # pragma: no cover - 
     as the search reaches it, on QVBS csma 4-2).  Pearce's one-array form
     of Tarjan's search (as SciPy's): ``rindex`` holds a state's index, then its low
     link, then, completed, ``n -`` its component, so an edge reads one number of
-    its head."""
+    its head.  A plain search in the same order comes first (:func:`_acyclic`): where
+    the graph has no cycle but self-loops it gives the same numbering and bits, else it
+    stops at its first cycle and Tarjan's search runs."""
     n = row_groups.shape[0] - 1
     ptr = np.empty(n + 1, dtype=np.int32)
     succ = np.empty(indptr[row_groups[n]] - indptr[row_groups[0]], dtype=np.int32)
@@ -95,8 +97,12 @@ def components_reach(indptr, indices, row_groups, seeds):  # pragma: no cover - 
     index = 1
     # the next completed component's rindex (its label n - c): above every entered
     # state's index (at most the states entered and not completed, n - n_components)
-    c = n
-    for root in range(n):
+    c = _acyclic(ptr, succ, acc, rindex, comp_bits, stack, work_v, work_at, n)
+    if c < 0:  # a cycle: Tarjan's search, from nothing
+        rindex[:] = 0
+        comp_bits[:] = 0
+        c = n
+    for root in range(n):  # nothing left to enter where the graph is acyclic
         if rindex[root]:
             continue
         v = root
@@ -177,6 +183,102 @@ def components_reach(indptr, indices, row_groups, seeds):  # pragma: no cover - 
             crowd[n_crowd] = s
             n_crowd += 1
     return n_comp, label, reach, crowd[:n_crowd], ptr, succ[:pos]
+
+
+@numba.njit(cache=True, nogil=True)
+def component_levels(indptr, indices, row_groups, label, n_comp):  # pragma: no cover
+    """``(level, ok)``: each component's level in the state graph of the choice matrix
+    ``indptr, indices`` (state ``s``'s choices are rows ``row_groups[s]:row_groups[s+1]``)
+    whose states lie in the components ``label`` (int32, ``n_comp`` of them): 0 for a
+    component without an edge to another, else one more than the highest level of those
+    it has an edge to, :func:`~mitld_lp.solvers.graph.levels`' longest path to a sink.
+    The components numbered as Tarjan's search completes them (:func:`components_reach`:
+    every edge between two runs from a higher id to a lower), each is final when the
+    components below it are: one pass over the components in increasing order, their
+    states grouped by a counting sort, each state's entries read once (no state graph,
+    no condensation, no round a level).  ``ok`` False where an edge runs up (not such a
+    numbering): the levels are then not read."""
+    n = row_groups.shape[0] - 1
+    start = np.zeros(n_comp + 1, dtype=np.int64)
+    for s in range(n):
+        start[label[s] + 1] += 1
+    for c in range(n_comp):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    members = np.empty(n, dtype=np.int32)
+    for s in range(n):
+        c = label[s]
+        members[fill[c]] = s
+        fill[c] += 1
+    level = np.zeros(n_comp, dtype=np.int64)
+    for c in range(n_comp):
+        lv = 0
+        for i in range(start[c], start[c + 1]):
+            s = members[i]
+            for e in range(indptr[row_groups[s]], indptr[row_groups[s + 1]]):
+                d = label[indices[e]]
+                if d == c:
+                    continue
+                if d > c:  # not final yet: not Tarjan's numbering
+                    return level, False
+                if level[d] >= lv:
+                    lv = level[d] + 1
+        level[c] = lv
+    return level, True
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _acyclic(ptr, succ, acc, rindex, comp_bits, bits, work_v, work_at,
+             n):  # pragma: no cover - compiled
+    """:func:`components_reach`'s search where the state graph has no cycle but
+    self-loops (a deadline's clock: QVBS firewire_dl 3-600, zeroconf_dl 1000-1-30): each
+    state is a component of its own, completed as the search leaves it, so a plain
+    depth-first search in the same order (roots increasing, successors from the last)
+    numbers them as Tarjan's does and ORs the same bits, without the low links or the
+    stack of entered states.  Writes ``rindex`` and ``comp_bits`` as Tarjan's search
+    leaves them (a completed state ``v``: ``rindex[v] = c``, its bits at ``n - c``;
+    ``-1`` marks a state on the path) and returns the last ``c``; ``-1`` as soon as an
+    edge enters a state on the path (a cycle), the arrays then to be cleared.  ``bits``
+    holds the bits found so far at each depth (scratch of ``n``)."""
+    c = n
+    for root in range(n):
+        if rindex[root]:
+            continue
+        rindex[root] = -1
+        work_v[0] = root
+        work_at[0] = ptr[root + 1] - 1
+        bits[0] = acc[root]
+        depth = 1
+        while depth:
+            v = work_v[depth - 1]
+            b = bits[depth - 1]
+            w = -1  # the next state to enter, if any
+            for at in range(work_at[depth - 1], ptr[v] - 1, -1):
+                x = succ[at]
+                rx = rindex[x]
+                if rx > 0:  # completed: its bits are final
+                    b |= comp_bits[n - rx]
+                elif rx == 0:
+                    w = x
+                    work_at[depth - 1] = at - 1
+                    break
+                elif x != v:  # on the path: a cycle
+                    return -1
+            if w >= 0:
+                bits[depth - 1] = b
+                rindex[w] = -1
+                work_v[depth] = w
+                work_at[depth] = ptr[w + 1] - 1
+                bits[depth] = acc[w]
+                depth += 1
+                continue
+            rindex[v] = c
+            comp_bits[n - c] = b
+            c -= 1
+            depth -= 1
+            if depth:
+                bits[depth - 1] |= b
+    return c
 
 
 def seed_columns(seeds: np.ndarray) -> np.ndarray:

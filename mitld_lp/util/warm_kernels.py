@@ -89,6 +89,9 @@ SIGNATURES: dict[str, dict[str, tuple[str, ...]]] = {
         "components_reach": (
             "i4/1C i4/1C i8/1C/ro b1/2C",
         ),
+        "component_levels": (
+            "i4/1C i4/1C i8/1C/ro i4/1C int",
+        ),
     },
     "mitld_lp.solvers.certify_kernels": {
         "bellman_rows": (
