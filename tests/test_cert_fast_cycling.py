@@ -21,7 +21,7 @@ from test_cert_fast_exact import model_of_rows
 from test_cert_small_exact import exact_optimum
 
 from mitld_lp.solvers import certify as C
-from mitld_lp.solvers import certify_chain, certify_compiled
+from mitld_lp.solvers import certify_blocks, certify_chain, certify_compiled
 from mitld_lp.solvers.analysis import may_cycle
 
 
@@ -33,6 +33,7 @@ def _paid(monkeypatch: pytest.MonkeyPatch, compiled: bool) -> None:
     monkeypatch.setattr(certify_compiled, "COMPILED_CHECK_MIN_ROWS", 0)
     monkeypatch.setattr(certify_compiled, "CYCLING_MIN_STATES", 0)
     monkeypatch.setattr(certify_chain, "kernel_loader", fake)
+    monkeypatch.setattr(certify_blocks, "_BLOCKS_WARM", [])  # asked afresh of the fake
 
 
 def _random_model(seed: int, n: int = 40) -> tuple[sp.csr_array, np.ndarray]:

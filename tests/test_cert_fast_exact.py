@@ -22,7 +22,7 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import ABSORB, MDP
 from mitld_lp.solvers import certify as C
-from mitld_lp.solvers import certify_chain, certify_compiled, certify_repair
+from mitld_lp.solvers import certify_blocks, certify_chain, certify_compiled, certify_repair
 from mitld_lp.solvers.rounding import float_down, float_up, rounding
 
 RARE = (1e-30, 1e-22, 1e-15, 3e-9)
@@ -166,12 +166,13 @@ CASES = [(seed, cyclic) for seed in range(6) for cyclic in (False, True)]
 def _paid(monkeypatch: pytest.MonkeyPatch, compiled: bool) -> None:
     """The compiled check (and the chain's compiled single levels) on or off,
     whatever this process loaded before."""
-    monkeypatch.setattr(certify_compiled, "kernel_loader",
-                        SimpleNamespace(compiled_paid=lambda: compiled))
+    fake = SimpleNamespace(compiled_paid=lambda: compiled, module_cached=lambda *a: compiled)
+    monkeypatch.setattr(certify_compiled, "kernel_loader", fake)
     monkeypatch.setattr(certify_compiled, "COMPILED_CHECK_MIN_ROWS", 0)
-    monkeypatch.setattr(certify_chain, "kernel_loader",
-                        SimpleNamespace(compiled_paid=lambda: compiled))
+    monkeypatch.setattr(certify_chain, "kernel_loader", fake)
     monkeypatch.setattr(certify_chain, "CHAIN_KERNEL_MIN_LEVELS", 0)
+    # the chain's blocks' cache look-up (kept once a process), asked afresh of the fake
+    monkeypatch.setattr(certify_blocks, "_BLOCKS_WARM", [])
 
 
 @pytest.mark.parametrize("compiled", [True, False])
