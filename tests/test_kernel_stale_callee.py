@@ -10,6 +10,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from mitld_lp.util import kernel_loader, kernel_sources
@@ -92,3 +93,54 @@ def test_a_stale_kernel_is_flushed_once_before_numbas_call(monkeypatch, tmp_path
     kernel._calls.clear()
     assert kernel(3) == 7
     assert order == ["recompile", "call", "call"]  # not stale any more: once
+
+
+def _module(monkeypatch, name: str, **values) -> None:
+    import types
+
+    module = types.ModuleType(name)
+    module.__dict__.update(values)
+    monkeypatch.setitem(sys.modules, name, module)
+
+
+def _kernel_of(module: str, name: str) -> kernel_loader.Kernel:
+    def body(x):
+        return x
+
+    body.__module__, body.__qualname__ = module, name
+    return kernel_loader.Kernel(body, {"cache": True})
+
+
+def test_kernel_modules_follow_the_kernels_in_globals_transitively(monkeypatch):
+    asked = []
+
+    class Lazy:  # a lazy numba: any attribute asked would import numba
+        def __getattr__(self, name):
+            asked.append(name)
+            raise AssertionError(name)
+
+    _module(monkeypatch, "mitld_lp._stale_a", numba=Lazy(), g=_kernel_of("mitld_lp._stale_b", "g"),
+            own=_kernel_of("mitld_lp._stale_a", "own"), np=np,
+            outside=_kernel_of("elsewhere", "h"))
+    _module(monkeypatch, "mitld_lp._stale_b", numba=Lazy(), k=_kernel_of("mitld_lp._stale_c", "k"))
+    _module(monkeypatch, "mitld_lp._stale_c", back=_kernel_of("mitld_lp._stale_a", "own"))
+    found = kernel_sources.kernel_modules("mitld_lp._stale_a")
+    assert found == {"mitld_lp._stale_b", "mitld_lp._stale_c"}  # c through b; not a, not elsewhere
+    assert asked == []
+    assert kernel_sources.kernel_modules("mitld_lp._stale_c") == {"mitld_lp._stale_a",
+                                                                  "mitld_lp._stale_b"}
+
+
+def test_the_sweeps_kernel_names_the_modules_it_imports_kernels_from():
+    """compiled_kernels' sweeps call the one- and two-model sweeps inlined: numba names
+    no environment of theirs, so only the imports say that an edit of theirs is the
+    sweeps' too.  Expected: the modules its source imports names from (read by ast)."""
+    import ast
+
+    from mitld_lp.solvers import compiled_kernels
+
+    tree = ast.parse(Path(compiled_kernels.__file__).read_text())
+    imported = {node.module for node in tree.body if isinstance(node, ast.ImportFrom)
+                and node.module and node.module.startswith("mitld_lp.solvers.")}
+    assert imported  # the test reads something
+    assert imported <= kernel_sources.kernel_modules("mitld_lp.solvers.compiled_kernels")

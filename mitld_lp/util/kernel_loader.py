@@ -584,9 +584,9 @@ def _store_entry(kernel: Kernel, key: tuple, args: tuple, dispatcher: Any) -> No
         if not modname.startswith(("mitld_lp.", "numba.")):
             return
         envs.append((e.env_name, modname, tuple(c.str for c in consts)))
-    if len({n for n, _, _ in envs}) != len(envs):
-        envs = list(dict.fromkeys(envs))
-    callees = [m for _, m, _ in envs if m.startswith("mitld_lp.") and m != kernel.__module__]
+    envs = list(dict.fromkeys(envs))  # each once, in order (names unique: the same list)
+    callees = kernel_sources.kernel_modules(kernel.__module__) | {  # inlined ones: no env
+        m for _, m, _ in envs if m.startswith("mitld_lp.") and m != kernel.__module__}
     sources = kernel_sources.callee_sources(callees)
     if callees and not sources:
         return

@@ -16,7 +16,7 @@ import importlib.util
 import sys
 from typing import Any
 
-__all__ = ["STALE", "callee_sources", "flush_numba_cache", "source_hash"]
+__all__ = ["STALE", "callee_sources", "flush_numba_cache", "kernel_modules", "source_hash"]
 
 STALE: set[tuple[str, str]] = set()
 """Kernels (module, qualified name) whose cache file names a kernel of another module
@@ -44,6 +44,28 @@ def callee_sources(modules: Any) -> tuple:
         except OSError:
             return ()
     return tuple(out)
+
+
+def kernel_modules(module: str) -> set[str]:
+    """Our modules (``mitld_lp.*``, not ``module`` itself) whose kernels the kernels of
+    ``module`` may call: those of the kernels in its globals, and theirs, transitively.
+    numba names a callee's module in the caller's environments only where the callee
+    needs one; a callee inlined, or one that boxes nothing, is named by none, and its
+    edit would leave the caller's cached machine code stale unseen.  A kernel is an
+    object whose own ``__dict__`` holds a ``py_func`` (the loader's kernels, numba's
+    dispatchers); a module's other globals are not asked (a lazy numba would import it)."""
+    seen, todo = {module}, [module]
+    while todo:
+        found = sys.modules.get(todo.pop())
+        for value in list(getattr(found, "__dict__", {}).values()):
+            own = getattr(value, "__dict__", None)
+            func = own.get("py_func") if isinstance(own, dict) else None
+            name = getattr(func, "__module__", None)
+            if isinstance(name, str) and name.startswith("mitld_lp.") and name not in seen:
+                seen.add(name)
+                todo.append(name)
+    seen.discard(module)
+    return seen
 
 
 def source_hash(path: str) -> str:
