@@ -45,19 +45,6 @@ def _pick2(a, b, best_a, best_b, minimise):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _open2(exits, c, rows, p, stop, listed):  # pragma: no cover - compiled
-    """Choice ``c``'s two sums started: from its exit rewards, or (``listed``: ``rows``
-    holds the choices whose exit row is not +0.0, ascending, and ``rows[p:stop]`` those
-    of ``c``'s state from ``c`` on) from 0.0 where ``c`` is not listed (its exits are
-    +0.0, so the same bits); the cursor moved past ``c``."""
-    if listed:
-        if p < stop and rows[p] == c:
-            return exits[c, 0], exits[c, 1], p + 1
-        return 0.0, 0.0, p
-    return exits[c, 0], exits[c, 1], p
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
 def _seek(rows, stop, first, listed):  # pragma: no cover - compiled
     """The first place in ``rows[:stop]`` of a listed choice ``>= first`` (a state's
     first choice; ``stop`` the first place of the next state's), as the states are
@@ -82,12 +69,19 @@ def _best2(indptr, indices, data, starts, leave, exits, local, s, minimise, rows
     self-loop solved, ``x / 1.0`` left out: it is ``x``; a choice that never leaves
     worth 0); the two bests.  Without ``loops`` (no entry of the block on its
     diagonal, so every ``leave`` is 1.0) no entry is compared with ``s`` and no
-    ``leave`` read: the same operations.  ``rows``, ``p``, ``stop``, ``listed``:
-    :func:`_open2`."""
+    ``leave`` read: the same operations.  With ``listed`` (:func:`plain2`) each sum
+    starts from its choice's exit rewards only where the choice is listed in
+    ``rows[p:stop]`` (the listed choices of ``s``, ascending), else from 0.0: the
+    unlisted exits are +0.0, so the same bits."""
     lo_best = np.inf if minimise else -np.inf
     hi_best = lo_best
     for c in range(starts[s], starts[s + 1]):
-        lo, hi, p = _open2(exits, c, rows, p, stop, listed)
+        lo = 0.0  # listed: a choice not in rows has exits +0.0 (the same bits)
+        hi = 0.0
+        if not listed or (p < stop and rows[p] == c):
+            lo = exits[c, 0]
+            hi = exits[c, 1]
+            p += 1  # a cursor only where listed (a helper returning it: 4x slower)
         if loops:
             for e in range(indptr[c], indptr[c + 1]):
                 t = indices[e]
@@ -122,10 +116,27 @@ def _set2(x, s, lo, hi, tol, precision, floor, over):  # pragma: no cover - comp
 @numba.njit(cache=True, nogil=True)
 def plain2(indptr, indices, data, starts, leave, exits, local, order, minimise,
            tol, precision, floor, rows, listed, loops):  # pragma: no cover - compiled
+    """:func:`_plain2` by one of three loops, ``listed`` and ``loops`` constants in each
+    (folded: the flags read at run time cost more than they save)."""
+    if listed and not loops:
+        return _plain2(indptr, indices, data, starts, leave, exits, local, order,
+                       minimise, tol, precision, floor, rows, True, False)
+    if listed:
+        return _plain2(indptr, indices, data, starts, leave, exits, local, order,
+                       minimise, tol, precision, floor, rows, True, True)
+    return _plain2(indptr, indices, data, starts, leave, exits, local, order,
+                   minimise, tol, precision, floor, rows, False, True)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _plain2(indptr, indices, data, starts, leave, exits, local, order, minimise,
+            tol, precision, floor, rows, listed, loops):  # pragma: no cover - compiled
     """One sweep of ``local``'s two columns through the states in ``order`` (with
-    ``listed``: the reversed range, not read, and only the exit rows in ``rows`` read,
-    :func:`_open2`; ``loops``: :func:`_best2`); the largest gap over its threshold
-    among the states swept, as :func:`watched2`'s."""
+    ``listed``: the reversed range, not read, and only the exits of the choices in
+    ``rows`` read, the choices whose exit row is not +0.0, ascending; ``loops``:
+    :func:`_best2`); the largest gap over its threshold among the states swept, as
+    :func:`watched2`'s.  Each sweep runs one of three loops, its flags constants
+    (:func:`plain2`'s)."""
     over = 0.0
     n = local.shape[0]
     stop = rows.shape[0]
@@ -143,6 +154,22 @@ def plain2(indptr, indices, data, starts, leave, exits, local, order, minimise,
 def watched2(indptr, indices, data, starts, leave, exits, local, order, minimise,
              guess, track, tol, precision, floor, rows, listed,
              loops):  # pragma: no cover - compiled
+    """:func:`_watched2` by one of three loops, ``listed`` and ``loops`` constants in each
+    (folded: the flags read at run time cost more than they save)."""
+    if listed and not loops:
+        return _watched2(indptr, indices, data, starts, leave, exits, local, order,
+                         minimise, guess, track, tol, precision, floor, rows, True, False)
+    if listed:
+        return _watched2(indptr, indices, data, starts, leave, exits, local, order,
+                         minimise, guess, track, tol, precision, floor, rows, True, True)
+    return _watched2(indptr, indices, data, starts, leave, exits, local, order,
+                     minimise, guess, track, tol, precision, floor, rows, False, True)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _watched2(indptr, indices, data, starts, leave, exits, local, order, minimise,
+              guess, track, tol, precision, floor, rows, listed,
+              loops):  # pragma: no cover - compiled
     """:func:`plain2` (``rows``, ``listed``, ``loops`` as there), each bound's change
     written into ``guess`` and each column's largest change into ``track``; returns the
     largest gap over its threshold among the states swept (read as each is set: the
@@ -179,6 +206,22 @@ def watched2(indptr, indices, data, starts, leave, exits, local, order, minimise
 def verifying2(indptr, indices, data, starts, leave, exits, work, order, minimise,
                track, tol, precision, floor, rows, listed,
                loops):  # pragma: no cover - compiled
+    """:func:`_verifying2` by one of three loops, ``listed`` and ``loops`` constants in each
+    (folded: the flags read at run time cost more than they save)."""
+    if listed and not loops:
+        return _verifying2(indptr, indices, data, starts, leave, exits, work, order,
+                           minimise, track, tol, precision, floor, rows, True, False)
+    if listed:
+        return _verifying2(indptr, indices, data, starts, leave, exits, work, order,
+                           minimise, track, tol, precision, floor, rows, True, True)
+    return _verifying2(indptr, indices, data, starts, leave, exits, work, order,
+                       minimise, track, tol, precision, floor, rows, False, True)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _verifying2(indptr, indices, data, starts, leave, exits, work, order, minimise,
+                track, tol, precision, floor, rows, listed,
+                loops):  # pragma: no cover - compiled
     """``compiled_kernels.checked`` for one model on the packed rows: ``work[t]`` holds
     ``t``'s lower and upper bound and its lower and upper guess side by side.  Each
     guess's sum is widened by a bound on its rounding error (a lower guess lowered, an
@@ -205,7 +248,12 @@ def verifying2(indptr, indices, data, starts, leave, exits, work, order, minimis
         gl_best = lo_best
         gh_best = lo_best
         for c in range(starts[s], starts[s + 1]):
-            lo, hi, p = _open2(exits, c, rows, p, stop_s, listed)
+            lo = 0.0
+            hi = 0.0
+            if not listed or (p < stop_s and rows[p] == c):
+                lo = exits[c, 0]
+                hi = exits[c, 1]
+                p += 1
             gl = lo
             gh = hi
             first = indptr[c]
