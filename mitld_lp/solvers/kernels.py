@@ -303,7 +303,9 @@ class Prepared:
         writes), which start every other choice's sums at 0.0, the same bits."""
         if self._exit_rows is None or self._exit_rows[0] is not exits:
             bits = exits.view(np.int64)
-            self._exit_rows = (exits, np.flatnonzero(bits[:, 0] | bits[:, 1]))
+            odd = bits[:, 0] != 0  # a byte a choice, not the eight of an int64 "or"
+            odd |= bits[:, 1] != 0
+            self._exit_rows = (exits, np.flatnonzero(odd))
         return self._exit_rows[1]
 
     @property
