@@ -10,7 +10,15 @@ order names each once, and only a guess proven after the sweep moves a bound, so
 caller need not read the bounds a second time (``compiled_kernels._over``: a pass over
 the packed rows of a verification, 32 bytes a state, 1.8 ms a sweep on QVBS
 ``zeroconf`` 1000-6 ``correct_min``'s block of 550,097 states) unless a guess was
-proven."""
+proven.
+
+Where the order is the reversed range (``kernels.sweep_order``'s) the sweeps walk the
+states ``n - 1 .. 0`` without reading it and read the exits only of the choices listed
+once a block (``kernels.Prepared.exit_rows``: 2.6% of that block's choices), every
+other sum started at 0.0 (its exits are +0.0); where no entry lies on the diagonal no
+entry is compared with its state and no ``leave`` read.  Each public sweep runs one of
+three loops with these flags constant: that block's 46 sweeps 861-874 -> 734-763 ms,
+the same bits."""
 
 from __future__ import annotations
 
