@@ -30,9 +30,10 @@ pytestmark = pytest.mark.skipif(kernels.compiled_kernel() is None,
 
 FLOOR = kernels.FLOOR
 INF = float("inf")
+NO_ROWS = np.empty(0, dtype=np.int64)
 
 
-def _block(seed: int, n: int = 40) -> tuple[sp.csr_array, np.ndarray, np.ndarray]:
+def random_block(seed: int, n: int = 40) -> tuple[sp.csr_array, np.ndarray, np.ndarray]:
     """A block of ``n`` states, 1-3 choices each, 1-3 entries a choice among the block
     (cycles; a self-loop in some; a choice wholly a self-loop in a few), exits to the
     target small or ``+0.0`` (some ``-0.0``), each row plus its exit at most 1."""
@@ -94,7 +95,7 @@ def _clip(v: float) -> float:
     return min(max(v, 0.0), 1.0)
 
 
-def _python_sweep(inner, groups, exits, x, minimise, tol, precision, flags=None):
+def python_sweep(inner, groups, exits, x, minimise, tol, precision, flags=None):
     """One Gauss--Seidel sweep of ``x`` (rows of [lower, upper] or, with ``flags``
     [lower on, upper on, lower fell, upper rose], [lower, upper, lower guess, upper
     guess]; in place) from the last state to the first; each bound's change and the
@@ -124,7 +125,7 @@ def _python_sweep(inner, groups, exits, x, minimise, tol, precision, flags=None)
     return change, over
 
 
-def _start(n: int, seed: int, guesses: bool) -> np.ndarray:
+def start_bounds(n: int, seed: int, guesses: bool) -> np.ndarray:
     """Bounds (and guesses between them) of ``n`` states, some equal, some at 0 and 1."""
     rng = np.random.default_rng(seed + 100)
     lo = rng.random(n) * 0.3
@@ -139,7 +140,7 @@ def _start(n: int, seed: int, guesses: bool) -> np.ndarray:
     return np.column_stack([lo, hi, gl, gh])
 
 
-def _track() -> np.ndarray:
+def one_model_track() -> np.ndarray:
     """The kernel's state between calls for one model, watching (compiled_kernels.OFF's
     layout: 8 header slots, then 6 a column), the guesses' first margin 1/16."""
     track = np.zeros(8 + 6 * 2)
@@ -158,45 +159,55 @@ def _two():
 @pytest.mark.parametrize("precision", [-1.0, 1e-3])
 @pytest.mark.parametrize("python", [False, True])
 def test_each_sweep_equals_a_python_sweep_to_the_bit(seed, minimise, precision, python):
-    two = _two()
-    inner, groups, exits = _block(seed)
-    n = groups.size - 1
+    inner, groups, exits = random_block(seed)
     prep = kernels.Prepared(inner, groups)
     indptr, indices = prep.index
     order = prep.order
     tol = 1e-3
     args = (indptr, indices, inner.data, prep.groups, prep.leave, exits)
     pick = (lambda f: f.py_func) if python else (lambda f: f)
-    # plain
-    local = _start(n, seed, False)
+    route = (NO_ROWS, False, True)  # the general route: order and every exit read
+    check_each_sweep(pick, (inner, groups, exits), args, order, route, seed, minimise, tol,
+                     precision)
+
+
+def check_each_sweep(pick, block, args, order, route, seed, minimise, tol, precision):
+    """``sweep_two``'s three sweeps (each through ``pick``) on ``block`` (``inner``,
+    ``groups``, ``exits``; ``args`` the kernel's first six), ``order`` and ``route``
+    (``rows``, ``listed``, ``loops``) against :func:`python_sweep`, to the bit: the
+    bounds, the changes, the largest changes, the gap, the guesses and their flags."""
+    two = _two()
+    inner, groups, exits = block
+    n = groups.size - 1
+    local = start_bounds(n, seed, False)
     x = local.tolist()
-    over = pick(two.plain2)(*args, local, order, minimise, tol, precision, FLOOR)
-    _, want = _python_sweep(inner, groups, exits, x, minimise, tol, precision)
+    over = pick(two.plain2)(*args, local, order, minimise, tol, precision, FLOOR, *route)
+    _, want = python_sweep(inner, groups, exits, x, minimise, tol, precision)
     np.testing.assert_array_equal(local, np.array(x))
     assert over == want
     # watched: the changes into guess, the largest of each column into track
-    local = _start(n, seed, False)
+    local = start_bounds(n, seed, False)
     x = local.tolist()
     guess = np.full_like(local, -1.0)
-    track = _track()
+    track = one_model_track()
     over = pick(two.watched2)(*args, local, order, minimise, guess, track, tol, precision,
-                              FLOOR)
-    change, want = _python_sweep(inner, groups, exits, x, minimise, tol, precision)
+                              FLOOR, *route)
+    change, want = python_sweep(inner, groups, exits, x, minimise, tol, precision)
     np.testing.assert_array_equal(local, np.array(x))
     np.testing.assert_array_equal(guess, np.array(change))
     assert over == want
     assert list(track[16:18]) == [max(c[0] for c in change), max(c[1] for c in change)]
     # verifying, with each guess on trial, verified or crossed
     for on in ((1.0, 1.0), (2.0, 1.0), (1.0, 3.0)):
-        work = _start(n, seed, True)
+        work = start_bounds(n, seed, True)
         x = work.tolist()
-        track = _track()
+        track = one_model_track()
         track[0] = 1.0
         track[14:16] = on
         flags = [*on, 0.0, 0.0]
         over = pick(two.verifying2)(*args, work, order, minimise, track, tol, precision,
-                                    FLOOR)
-        _, want = _python_sweep(inner, groups, exits, x, minimise, tol, precision, flags)
+                                    FLOOR, *route)
+        _, want = python_sweep(inner, groups, exits, x, minimise, tol, precision, flags)
         np.testing.assert_array_equal(work, np.array(x))
         assert over == want
         assert [track[14], track[15], track[18], track[19]] == flags

@@ -146,14 +146,14 @@ def _over(local, k, tol, precision, floor):  # pragma: no cover - compiled
 
 @numba.njit(cache=True, nogil=True)
 def _plain(indptr, indices, data, starts, leave, exits, local, order, best,
-           acc, minimise, tol, precision, floor):  # pragma: no cover
+           acc, minimise, tol, precision, floor, rows, listed, loops):  # pragma: no cover
     """One sweep of ``local`` through the states in ``order``; for one model the
     largest gap over its threshold read as each state is set (:func:`_watched`), -1 for
     more."""
     n, k = local.shape
     if k == 2:  # one model: its sums in scalars (sweep_two)
         return plain2(indptr, indices, data, starts, leave, exits, local, order,
-                      minimise, tol, precision, floor)
+                      minimise, tol, precision, floor, rows, listed, loops)
     if k == 4:  # two models: their sums in scalars (sweep_four)
         plain4(indptr, indices, data, starts, leave, exits, local, order, minimise)
         return -1.0
@@ -165,7 +165,8 @@ def _plain(indptr, indices, data, starts, leave, exits, local, order, best,
 
 @numba.njit(cache=True, nogil=True)
 def _watched(indptr, indices, data, starts, leave, exits, local, order, best,
-             acc, minimise, guess, track, tol, precision, floor):  # pragma: no cover - compiled
+             acc, minimise, guess, track, tol, precision, floor, rows, listed,
+             loops):  # pragma: no cover - compiled
     """:func:`_plain`, each bound's change written into ``guess`` and each column's
     largest change into ``track``; returns the largest gap over its threshold after the
     sweep (:func:`_over`) for one or two models, -1 for more (the caller reads it then).
@@ -179,7 +180,8 @@ def _watched(indptr, indices, data, starts, leave, exits, local, order, best,
     n, k = local.shape
     if k == 2:
         return watched2(indptr, indices, data, starts, leave, exits, local, order,
-                        minimise, guess, track, tol, precision, floor)
+                        minimise, guess, track, tol, precision, floor, rows, listed,
+                        loops)
     if k == 4:
         return watched4(indptr, indices, data, starts, leave, exits, local, order,
                         minimise, guess, track, tol, precision, floor)
@@ -199,7 +201,8 @@ def _watched(indptr, indices, data, starts, leave, exits, local, order, best,
 
 @numba.njit(cache=True, nogil=True)
 def _verifying(indptr, indices, data, starts, leave, exits, work, order, best,
-               acc, minimise, track, tol, precision, floor):  # pragma: no cover - compiled
+               acc, minimise, track, tol, precision, floor, rows, listed,
+               loops):  # pragma: no cover - compiled
     """One sweep of the proven bounds and of the guesses on trial (:func:`checked`),
     both packed into ``work``'s rows (the bounds in its first ``k`` columns, the
     guesses in the next ``k``): an entry reads one row where two arrays cost two reads
@@ -210,7 +213,7 @@ def _verifying(indptr, indices, data, starts, leave, exits, work, order, best,
     k = kk // 2
     if k == 2:
         return verifying2(indptr, indices, data, starts, leave, exits, work, order,
-                          minimise, track, tol, precision, floor)
+                          minimise, track, tol, precision, floor, rows, listed, loops)
     if k == 4:
         verifying4(indptr, indices, data, starts, leave, exits, work, order, minimise,
                    track)
@@ -237,7 +240,8 @@ def _pack(local, guess, work, back):  # pragma: no cover - compiled
 
 @numba.njit(cache=True, nogil=True)
 def gauss_seidel(indptr, indices, data, starts, leave, exits, local, order, max_sweeps,
-                 tol, minimise, precision, floor, guess, track):  # pragma: no cover - compiled
+                 tol, minimise, precision, floor, guess, track, rows, listed,
+                 loops):  # pragma: no cover - compiled
     """Sweeps through the states in ``order`` (each state once: a permutation, as
     :func:`~mitld_lp.solvers.kernels.sweep_order` gives; a watched sweep reads the gaps
     as it sets them only when ``order`` has one place a state) until every gap is below
@@ -249,7 +253,14 @@ def gauss_seidel(indptr, indices, data, starts, leave, exits, local, order, max_
     ``guess`` holds each bound's change in the last sweep, while verifying the guesses
     on trial; ``local`` holds proven bounds only, a guess written into it once proven.
     Each kind of sweep is its own function: one loop with all three branches in it
-    compiled to much slower plain sweeps."""
+    compiled to much slower plain sweeps.
+
+    One model (two columns; more ignore these three): ``listed`` says ``order`` is the
+    reversed range (then not read) and ``rows`` the choices whose row of ``exits`` is
+    not +0.0, ascending (every other sum starts at 0.0: the same bits); ``loops`` that
+    some entry lies on the diagonal (else no entry is compared with its state and no
+    ``leave`` read, each 1.0).  QVBS ``zeroconf`` 1000-6 ``correct_min``'s block: 2.6%
+    of its choices listed, no self-loop."""
     n, k = local.shape
     best = np.empty(2 * k)
     acc = np.empty(2 * k)
@@ -258,7 +269,8 @@ def gauss_seidel(indptr, indices, data, starts, leave, exits, local, order, max_
     optimistic = track[0] >= 0.0
     work = np.empty((0, 2 * k))  # the packed rows of a verification, made at its start
     packed = False
-    whole = order.shape[0] == n  # every state once a sweep: a watched sweep reads the gap
+    # every state once a sweep: a watched sweep reads the gap
+    whole = listed or order.shape[0] == n
     while done < max_sweeps:
         for j in range(k):
             track[OFF + 4 * k + j] = 0.0
@@ -266,7 +278,7 @@ def gauss_seidel(indptr, indices, data, starts, leave, exits, local, order, max_
         proven = track[3]
         if not optimistic:
             swept = _plain(indptr, indices, data, starts, leave, exits, local, order,
-                           best, acc, minimise, tol, precision, floor)
+                           best, acc, minimise, tol, precision, floor, rows, listed, loops)
         elif track[0] == 1.0:
             if not packed:
                 if work.shape[0] != n:
@@ -274,10 +286,12 @@ def gauss_seidel(indptr, indices, data, starts, leave, exits, local, order, max_
                 _pack(local, guess, work, np.bool_(False))  # bool_: not a literal type
                 packed = True
             swept = _verifying(indptr, indices, data, starts, leave, exits, work, order,
-                               best, acc, minimise, track, tol, precision, floor)
+                               best, acc, minimise, track, tol, precision, floor, rows,
+                               listed, loops)
         else:
             swept = _watched(indptr, indices, data, starts, leave, exits, local, order,
-                             best, acc, minimise, guess, track, tol, precision, floor)
+                             best, acc, minimise, guess, track, tol, precision, floor,
+                             rows, listed, loops)
         # the gap over its threshold read by the sweep (-1: not), good when every state
         # was swept once: each is set once a sweep, and nothing after it moves a bound
         # but a guess proven (then read again)

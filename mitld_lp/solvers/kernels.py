@@ -253,8 +253,8 @@ class Prepared:
     """A block's matrix prepared for the sweeps: each choice's ``1 - self-loop`` and,
     for the NumPy sweeps, the matrix without its diagonal."""
 
-    __slots__ = ("inner", "leave", "starts", "groups", "order", "_diag", "_off", "guess",
-                 "track", "_index", "closing", "_fold")
+    __slots__ = ("inner", "leave", "starts", "groups", "_order", "_diag", "_off", "guess",
+                 "track", "_index", "closing", "_fold", "reverse", "loops", "_exit_rows")
 
     def __init__(self, inner: sp.csr_array, groups: np.ndarray) -> None:
         self.inner = inner
@@ -274,12 +274,39 @@ class Prepared:
         self_loop = np.bincount(row, weights=inner.data[self._diag], minlength=n_choices)
         self.leave = 1.0 - self_loop
         self._off: sp.csr_array | None = None
+        self.loops = bool(self._diag.size)  # an entry on the diagonal (compiled sweeps)
         self.order = sweep_order(self.groups.size - 1)
+        self._exit_rows: tuple[np.ndarray, np.ndarray] | None = None
         self.guess: np.ndarray | None = None  # the compiled sweeps' guesses, made there
         self.track: np.ndarray | None = None
         self.closing = False  # the guesses turned off near the end (iteration._close_out)
         self._index: tuple[np.ndarray, np.ndarray] | None = None
         self._fold: tuple[int, bool] | None = None
+
+    @property
+    def order(self) -> np.ndarray:
+        """The states in the order the compiled sweeps visit them (:func:`sweep_order`'s
+        unless set); :attr:`reverse` says whether it is that reversed range."""
+        return self._order
+
+    @order.setter
+    def order(self, order: np.ndarray) -> None:
+        self._order = order
+        n = self.groups.size - 1
+        self.reverse = bool(order.shape[0] == n
+                            and np.array_equal(order, np.arange(n - 1, -1, -1)))
+
+    def exit_rows(self, exits: np.ndarray) -> np.ndarray:
+        """The choices whose row of ``exits`` (one model's two columns, C-contiguous
+        float64) is not +0.0 in every bit, ascending: listed once a block for the
+        one-model sweeps (kept for the same ``exits`` object, which a block never
+        writes), which start every other choice's sums at 0.0, the same bits."""
+        if self._exit_rows is None or self._exit_rows[0] is not exits:
+            bits = exits.view(np.int64)
+            odd = bits[:, 0] != 0  # a byte a choice, not the eight of an int64 "or"
+            odd |= bits[:, 1] != 0
+            self._exit_rows = (exits, np.flatnonzero(odd))
+        return self._exit_rows[1]
 
     @property
     def fold(self) -> tuple[int, bool]:
@@ -362,13 +389,17 @@ def compiled_sweeps(prep: Prepared, exits: np.ndarray, local: np.ndarray, tol: f
     if prep.guess is None or prep.guess.shape != local.shape:
         prep.guess = np.zeros_like(local)
         prep.track = _new_track(local.shape[1], OPTIMISTIC)
-    done, over = kernel(indptr, indices, inner.data, prep.groups, prep.leave,
-                        np.ascontiguousarray(exits, dtype=np.float64), local,
+    exits = np.ascontiguousarray(exits, dtype=np.float64)
+    listed = prep.reverse and local.shape[1] == 2  # one model: its exit rows listed
+    rows = prep.exit_rows(exits) if listed else _NO_ROWS
+    done, over = kernel(indptr, indices, inner.data, prep.groups, prep.leave, exits, local,
                         prep.order, int(max_sweeps), float(tol), sense is Sense.MIN,
                         -1.0 if precision is None else float(precision), FLOOR,
-                        prep.guess, prep.track)
+                        prep.guess, prep.track, rows, listed, prep.loops)
     return int(done), float(over)
 
+
+_NO_ROWS = np.empty(0, dtype=np.int64)
 
 OPTIMISTIC = True
 """Whether the compiled sweeps guess and verify bounds (module docs)."""

@@ -10,7 +10,15 @@ order names each once, and only a guess proven after the sweep moves a bound, so
 caller need not read the bounds a second time (``compiled_kernels._over``: a pass over
 the packed rows of a verification, 32 bytes a state, 1.8 ms a sweep on QVBS
 ``zeroconf`` 1000-6 ``correct_min``'s block of 550,097 states) unless a guess was
-proven."""
+proven.
+
+Where the order is the reversed range (``kernels.sweep_order``'s) the sweeps walk the
+states ``n - 1 .. 0`` without reading it and read the exits only of the choices listed
+once a block (``kernels.Prepared.exit_rows``: 2.6% of that block's choices), every
+other sum started at 0.0 (its exits are +0.0); where no entry lies on the diagonal no
+entry is compared with its state and no ``leave`` read.  Each public sweep runs one of
+three loops with these flags constant: that block's 46 sweeps 861-874 -> 734-763 ms,
+the same bits."""
 
 from __future__ import annotations
 
@@ -45,23 +53,57 @@ def _pick2(a, b, best_a, best_b, minimise):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _best2(indptr, indices, data, starts, leave, exits, local, s,
-           minimise):  # pragma: no cover - compiled
+def _seek(rows, stop, first, listed):  # pragma: no cover - compiled
+    """The first place in ``rows[:stop]`` of a listed choice ``>= first`` (a state's
+    first choice; ``stop`` the first place of the next state's), as the states are
+    swept from the last to the first; ``stop`` unless ``listed``."""
+    p = stop
+    if listed:
+        while p > 0 and rows[p - 1] >= first:
+            p -= 1
+    return p
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _state(order, i, n, listed):  # pragma: no cover - compiled
+    """The ``i``-th state swept: ``order[i]``, or the reversed range's unread."""
+    return n - 1 - i if listed else order[i]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _best2(indptr, indices, data, starts, leave, exits, local, s, minimise, rows, p,
+           stop, listed, loops):  # pragma: no cover - compiled
     """State ``s``'s best choice's sums over ``local``'s two columns (each choice's
     self-loop solved, ``x / 1.0`` left out: it is ``x``; a choice that never leaves
-    worth 0); the two bests."""
+    worth 0); the two bests.  Without ``loops`` (no entry of the block on its
+    diagonal, so every ``leave`` is 1.0) no entry is compared with ``s`` and no
+    ``leave`` read: the same operations.  With ``listed`` (:func:`plain2`) each sum
+    starts from its choice's exit rewards only where the choice is listed in
+    ``rows[p:stop]`` (the listed choices of ``s``, ascending), else from 0.0: the
+    unlisted exits are +0.0, so the same bits."""
     lo_best = np.inf if minimise else -np.inf
     hi_best = lo_best
     for c in range(starts[s], starts[s + 1]):
-        lo = exits[c, 0]
-        hi = exits[c, 1]
-        for e in range(indptr[c], indptr[c + 1]):
-            t = indices[e]
-            if t != s:
+        lo = 0.0  # listed: a choice not in rows has exits +0.0 (the same bits)
+        hi = 0.0
+        if not listed or (p < stop and rows[p] == c):
+            lo = exits[c, 0]
+            hi = exits[c, 1]
+            p += 1  # a cursor only where listed (a helper returning it: 4x slower)
+        if loops:
+            for e in range(indptr[c], indptr[c + 1]):
+                t = indices[e]
+                if t != s:
+                    w = data[e]
+                    lo += w * local[t, 0]
+                    hi += w * local[t, 1]
+            lo, hi = _divide2(lo, hi, leave[c])
+        else:
+            for e in range(indptr[c], indptr[c + 1]):
+                t = indices[e]
                 w = data[e]
                 lo += w * local[t, 0]
                 hi += w * local[t, 1]
-        lo, hi = _divide2(lo, hi, leave[c])
         lo_best, hi_best = _pick2(lo, hi, lo_best, hi_best, minimise)
     return lo_best, hi_best
 
@@ -81,32 +123,79 @@ def _set2(x, s, lo, hi, tol, precision, floor, over):  # pragma: no cover - comp
 
 @numba.njit(cache=True, nogil=True)
 def plain2(indptr, indices, data, starts, leave, exits, local, order, minimise,
-           tol, precision, floor):  # pragma: no cover - compiled
-    """One sweep of ``local``'s two columns through the states in ``order``; the
-    largest gap over its threshold among the states swept, as :func:`watched2`'s."""
+           tol, precision, floor, rows, listed, loops):  # pragma: no cover - compiled
+    """:func:`_plain2` by one of three loops, ``listed`` and ``loops`` constants in each
+    (folded: the flags read at run time cost more than they save)."""
+    if listed and not loops:
+        return _plain2(indptr, indices, data, starts, leave, exits, local, order,
+                       minimise, tol, precision, floor, rows, True, False)
+    if listed:
+        return _plain2(indptr, indices, data, starts, leave, exits, local, order,
+                       minimise, tol, precision, floor, rows, True, True)
+    return _plain2(indptr, indices, data, starts, leave, exits, local, order,
+                   minimise, tol, precision, floor, rows, False, True)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _plain2(indptr, indices, data, starts, leave, exits, local, order, minimise,
+            tol, precision, floor, rows, listed, loops):  # pragma: no cover - compiled
+    """One sweep of ``local``'s two columns through the states in ``order`` (with
+    ``listed``: the reversed range, not read, and only the exits of the choices in
+    ``rows`` read, the choices whose exit row is not +0.0, ascending; ``loops``:
+    :func:`_best2`); the largest gap over its threshold among the states swept, as
+    :func:`watched2`'s.  Each sweep runs one of three loops, its flags constants
+    (:func:`plain2`'s)."""
     over = 0.0
-    for i in range(order.shape[0]):
-        s = order[i]
-        lo, hi = _best2(indptr, indices, data, starts, leave, exits, local, s, minimise)
+    n = local.shape[0]
+    stop = rows.shape[0]
+    for i in range(n if listed else order.shape[0]):
+        s = _state(order, i, n, listed)
+        p = _seek(rows, stop, starts[s], listed)
+        lo, hi = _best2(indptr, indices, data, starts, leave, exits, local, s, minimise,
+                        rows, p, stop, listed, loops)
+        stop = p
         _, _, over = _set2(local, s, lo, hi, tol, precision, floor, over)
     return over
 
 
 @numba.njit(cache=True, nogil=True)
 def watched2(indptr, indices, data, starts, leave, exits, local, order, minimise,
-             guess, track, tol, precision, floor):  # pragma: no cover - compiled
-    """:func:`plain2`, each bound's change written into ``guess`` and each column's
-    largest change into ``track``; returns the largest gap over its threshold among the
-    states swept (read as each is set: the caller uses it only when ``order`` holds
-    every state once, then it is ``compiled_kernels._over``'s maximum)."""
+             guess, track, tol, precision, floor, rows, listed,
+             loops):  # pragma: no cover - compiled
+    """:func:`_watched2` by one of three loops, ``listed`` and ``loops`` constants in each
+    (folded: the flags read at run time cost more than they save)."""
+    if listed and not loops:
+        return _watched2(indptr, indices, data, starts, leave, exits, local, order,
+                         minimise, guess, track, tol, precision, floor, rows, True, False)
+    if listed:
+        return _watched2(indptr, indices, data, starts, leave, exits, local, order,
+                         minimise, guess, track, tol, precision, floor, rows, True, True)
+    return _watched2(indptr, indices, data, starts, leave, exits, local, order,
+                     minimise, guess, track, tol, precision, floor, rows, False, True)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _watched2(indptr, indices, data, starts, leave, exits, local, order, minimise,
+              guess, track, tol, precision, floor, rows, listed,
+              loops):  # pragma: no cover - compiled
+    """:func:`plain2` (``rows``, ``listed``, ``loops`` as there), each bound's change
+    written into ``guess`` and each column's largest change into ``track``; returns the
+    largest gap over its threshold among the states swept (read as each is set: the
+    caller uses it only when ``order`` holds every state once, then it is
+    ``compiled_kernels._over``'s maximum)."""
     m0 = track[OFF + 8]  # OFF + 4 k + j, k = 2: this sweep's largest changes
     m1 = track[OFF + 9]
     over = 0.0
-    for i in range(order.shape[0]):
-        s = order[i]
+    n = local.shape[0]
+    stop = rows.shape[0]
+    for i in range(n if listed else order.shape[0]):
+        s = _state(order, i, n, listed)
         a = local[s, 0]
         b = local[s, 1]
-        lo, hi = _best2(indptr, indices, data, starts, leave, exits, local, s, minimise)
+        p = _seek(rows, stop, starts[s], listed)
+        lo, hi = _best2(indptr, indices, data, starts, leave, exits, local, s, minimise,
+                        rows, p, stop, listed, loops)
+        stop = p
         lo, hi, over = _set2(local, s, lo, hi, tol, precision, floor, over)
         d0 = abs(lo - a)
         d1 = abs(hi - b)
@@ -123,7 +212,24 @@ def watched2(indptr, indices, data, starts, leave, exits, local, order, minimise
 
 @numba.njit(cache=True, nogil=True)
 def verifying2(indptr, indices, data, starts, leave, exits, work, order, minimise,
-               track, tol, precision, floor):  # pragma: no cover - compiled
+               track, tol, precision, floor, rows, listed,
+               loops):  # pragma: no cover - compiled
+    """:func:`_verifying2` by one of three loops, ``listed`` and ``loops`` constants in each
+    (folded: the flags read at run time cost more than they save)."""
+    if listed and not loops:
+        return _verifying2(indptr, indices, data, starts, leave, exits, work, order,
+                           minimise, track, tol, precision, floor, rows, True, False)
+    if listed:
+        return _verifying2(indptr, indices, data, starts, leave, exits, work, order,
+                           minimise, track, tol, precision, floor, rows, True, True)
+    return _verifying2(indptr, indices, data, starts, leave, exits, work, order,
+                       minimise, track, tol, precision, floor, rows, False, True)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _verifying2(indptr, indices, data, starts, leave, exits, work, order, minimise,
+                track, tol, precision, floor, rows, listed,
+                loops):  # pragma: no cover - compiled
     """``compiled_kernels.checked`` for one model on the packed rows: ``work[t]`` holds
     ``t``'s lower and upper bound and its lower and upper guess side by side.  Each
     guess's sum is widened by a bound on its rounding error (a lower guess lowered, an
@@ -132,35 +238,53 @@ def verifying2(indptr, indices, data, starts, leave, exits, work, order, minimis
     its other side.  The trial and failure flags are held in locals for the sweep and
     written back at its end (a flag set mid-sweep stops its guess's updates from the
     next state on).  Returns the largest gap over its threshold of the bounds swept, as
-    :func:`watched2` does."""
+    :func:`watched2` does.  ``rows``, ``listed``, ``loops``: :func:`plain2`."""
     lower_on = track[OFF + 6]  # the lower guess's trial (1: on trial, 3: crossed)
     upper_on = track[OFF + 7]
     lower_fell = track[OFF + 10]  # 1: a lower guess fell in this sweep
     upper_rose = track[OFF + 11]
     over = 0.0
-    for i in range(order.shape[0]):
-        s = order[i]
+    n = work.shape[0]
+    stop = rows.shape[0]
+    for i in range(n if listed else order.shape[0]):
+        s = _state(order, i, n, listed)
+        p = _seek(rows, stop, starts[s], listed)
+        stop_s = stop
+        stop = p
         lo_best = np.inf if minimise else -np.inf
         hi_best = lo_best
         gl_best = lo_best
         gh_best = lo_best
         for c in range(starts[s], starts[s + 1]):
-            lo = exits[c, 0]
-            hi = exits[c, 1]
+            lo = 0.0
+            hi = 0.0
+            if not listed or (p < stop_s and rows[p] == c):
+                lo = exits[c, 0]
+                hi = exits[c, 1]
+                p += 1
             gl = lo
             gh = hi
             first = indptr[c]
             last = indptr[c + 1]
-            for e in range(first, last):
-                t = indices[e]
-                if t != s:
+            if loops:
+                for e in range(first, last):
+                    t = indices[e]
+                    if t != s:
+                        w = data[e]
+                        lo += w * work[t, 0]
+                        hi += w * work[t, 1]
+                        gl += w * work[t, 2]
+                        gh += w * work[t, 3]
+                lo, hi = _divide2(lo, hi, leave[c])
+                gl, gh = _divide2(gl, gh, leave[c])
+            else:
+                for e in range(first, last):
+                    t = indices[e]
                     w = data[e]
                     lo += w * work[t, 0]
                     hi += w * work[t, 1]
                     gl += w * work[t, 2]
                     gh += w * work[t, 3]
-            lo, hi = _divide2(lo, hi, leave[c])
-            gl, gh = _divide2(gl, gh, leave[c])
             wide = (last - first + 8) * 2.0**-52
             gl *= 1.0 - wide
             gh *= 1.0 + wide

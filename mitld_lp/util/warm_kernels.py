@@ -140,7 +140,7 @@ SIGNATURES: dict[str, dict[str, tuple[str, ...]]] = {
     "mitld_lp.solvers.compiled_kernels": {
         "gauss_seidel": (
             "i4/1C i4/1C f8/1C i8/1C f8/1C f8/2C f8/2C i8/1C int float bool float float f8/2C "
-            "f8/1C",
+            "f8/1C i8/1C bool bool",
         ),
     },
     "mitld_lp.solvers.greedy_kernels": {
