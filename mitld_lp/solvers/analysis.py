@@ -95,7 +95,6 @@ from mitld_lp.solvers.graph import (
     EndComponents,
     Sense,
     attractor_spared,
-    attractors,
     backward_reachable,
     components_reaching,
     state_levels,
@@ -142,15 +141,10 @@ def _sweeps_compiled(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) 
 def _prob0e(m: sp.csr_array, row_groups: np.ndarray, goal: np.ndarray, wide: np.ndarray,
             two: bool) -> tuple[list[np.ndarray], np.ndarray, tuple]:
     """A minimum's prob-0 states for ``goal`` and for ``wide`` (``Prob0E``: outside the
-    attractor of each; ``two``: the targets differ, so two attractors on one reversed
-    pattern) and its maybe states (in the wide attractor, outside ``wide``); third, the
-    lift's staying strategy on each prob-0 set, read from its attractor's hit choices
-    (:func:`~mitld_lp.solvers.analysis_staying.staying_record`; none where two attractors
-    share NumPy's reversed pattern, which gives no hit choices)."""
-    if two:
-        if attractor_walks(m.nnz) is None:
-            positive, reach_goal = attractors(m, row_groups, [wide, goal])
-            return [~reach_goal, ~positive], positive & ~wide, ()
+    attractor of each; ``two``: the targets differ, so two attractors) and its maybe
+    states (in the wide attractor, outside ``wide``); third, the lift's staying strategy
+    on each prob-0 set, read from its attractor's hit choices (:func:`~mitld_lp.solvers.analysis_staying.staying_record`)."""
+    if two:  # each attractor with its hit choices (NumPy's walk reverses the pattern twice)
         positive, hit_wide = attractor_spared(m, row_groups, wide)
         reach_goal, hit_goal = attractor_spared(m, row_groups, goal)
         zero = [~reach_goal, ~positive]

@@ -16,18 +16,20 @@ choice keeps one unhit (else it would have joined), so the walk below ends.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.value_one import SureStrategy
-from mitld_lp.util.arrays import index_dtype
+from mitld_lp.util.arrays import SLICE_STATES, index_dtype
 
-__all__ = ["STAYING_STRATEGY", "first_unhit", "recorded_staying", "staying_record"]
+__all__ = ["STAYING_STRATEGY", "Staying", "first_unhit", "recorded_staying", "staying_record"]
 
 STAYING_STRATEGY = "staying strategy"
-"""The key in ``Quotient.shared`` of a minimum's staying strategies: a tuple of pairs
-``(prob0, SureStrategy)``, one per prob-0 set the analysis found (:func:`staying_record`);
-a quotient reads the pair whose array *is* its ``prob0``."""
+"""The key in ``Quotient.shared`` of a minimum's staying strategies: a tuple of
+:class:`Staying` records, one per prob-0 set the analysis found (:func:`staying_record`);
+a quotient reads the one whose set *is* its ``prob0``."""
 
 
 def first_unhit(row_groups: np.ndarray, zero: np.ndarray, hit: np.ndarray) -> SureStrategy:
@@ -38,7 +40,13 @@ def first_unhit(row_groups: np.ndarray, zero: np.ndarray, hit: np.ndarray) -> Su
     choices): raises otherwise."""
     groups = np.asarray(row_groups)
     n = groups.shape[0] - 1
-    states = np.flatnonzero(np.asarray(zero, dtype=bool) & (groups[1:] - groups[:-1] > 1))
+    zero = np.asarray(zero, dtype=bool)
+    parts = []  # a slice of states at a time: no int64 array of every state's count
+    for lo in range(0, n, SLICE_STATES):
+        hi = min(lo + SLICE_STATES, n)
+        many = np.flatnonzero(zero[lo:hi] & (groups[lo + 1:hi + 1] - groups[lo:hi] > 1))
+        parts.append(many + lo)
+    states = np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
     choice = groups[states].astype(np.int64)
     last = groups[states + 1] - 1
     pending = np.flatnonzero(hit[choice])
@@ -51,18 +59,34 @@ def first_unhit(row_groups: np.ndarray, zero: np.ndarray, hit: np.ndarray) -> Su
                         read_only(choice.astype(index_dtype(int(hit.size)), copy=False)))
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class Staying:
+    """A prob-0 set (``zero``, the array a quotient holds as its ``prob0``) and the
+    staying strategy on its states of several choices (``played``).  Equal to another
+    with equal arrays (two analyses of one product compare equal)."""
+
+    zero: np.ndarray
+    played: SureStrategy
+
+    def __eq__(self, other: object) -> bool:
+        return (isinstance(other, Staying) and self.zero.dtype == other.zero.dtype
+                and np.array_equal(self.zero, other.zero) and self.played == other.played)
+
+    __hash__ = None  # type: ignore[assignment]  # mutable-looking arrays: unhashable
+
+
 def staying_record(pairs: list[tuple[np.ndarray, np.ndarray]], row_groups: np.ndarray
-                   ) -> tuple[tuple[np.ndarray, SureStrategy], ...]:
+                   ) -> tuple[Staying, ...]:
     """:data:`STAYING_STRATEGY`'s record: per ``(prob0, hit)`` (a prob-0 set, the
     complement of an attractor, and that attractor's hit choices), the set itself and
     :func:`first_unhit`'s strategy on it."""
-    return tuple((zero, first_unhit(row_groups, zero, hit)) for zero, hit in pairs)
+    return tuple(Staying(zero, first_unhit(row_groups, zero, hit)) for zero, hit in pairs)
 
 
 def recorded_staying(shared: dict, prob0: np.ndarray) -> SureStrategy | None:
     """The staying strategy recorded in ``shared`` for the prob-0 set ``prob0`` (the
     same array object), else None (a quotient built otherwise: the lift searches)."""
-    for zero, played in shared.get(STAYING_STRATEGY, ()):
-        if zero is prob0:
-            return played
+    for record in shared.get(STAYING_STRATEGY, ()):
+        if record.zero is prob0:
+            return record.played
     return None
