@@ -40,27 +40,29 @@ def _mdp(rng: np.random.Generator, n: int, zeros: bool = False
     loops; ``zeros``: some entries stored as an explicit zero (no edge)."""
     kind = rng.choice(4, n, p=[0.88, 0.04, 0.05, 0.03])  # plain, goal, sink, truncated
     kind[0] = 0
-    rows, cols, vals, actions, groups = [], [], [], [], [0]
-    c = 0
+    # per state its choices, each an action and a list of (successor, probability)
+    states: list[list[tuple[int, list[tuple[int, float]]]]] = []
     for s in range(n):
         if kind[s]:
-            rows.append(c), cols.append(s), vals.append(1.0), actions.append(ABSORB)
-            c += 1
-            groups.append(c)
+            states.append([(ABSORB, [(s, 1.0)])])
             continue
+        mine = []
         for a in range(int(rng.integers(1, 5))):
-            if rng.random() < 0.15:
-                ts = [s]
-            else:
-                k = int(rng.integers(1, 4))
-                ts = sorted({int((s + d) % n) for d in rng.integers(-5, 9, k)})
-            for t in ts:
-                rows.append(c), cols.append(t), vals.append(1.0 / len(ts))
+            k = int(rng.integers(1, 4))
+            ts = [s] if rng.random() < 0.15 else \
+                sorted({int((s + d) % n) for d in rng.integers(-5, 9, k)})
+            row = [(t, 1.0 / len(ts)) for t in ts]
             if zeros and rng.random() < 0.2:  # a stored zero toward a further state
-                rows.append(c), cols.append(int((s + 11) % n)), vals.append(0.0)
-            actions.append(a)
-            c += 1
-        groups.append(c)
+                row.append((int((s + 11) % n), 0.0))
+            mine.append((a, row))
+        states.append(mine)
+    flat = [ch for mine in states for ch in mine]
+    c = len(flat)
+    rows = [r for r, (_, row) in enumerate(flat) for _ in row]
+    cols = [t for _, row in flat for t, _ in row]
+    vals = [p for _, row in flat for _, p in row]
+    actions = [a for a, _ in flat]
+    groups = np.concatenate([[0], np.cumsum([len(mine) for mine in states])])
     matrix = sp.csr_array((vals, (rows, cols)), shape=(c, n))  # sums duplicates
     matrix.indices = matrix.indices.astype(np.int32)
     matrix.indptr = matrix.indptr.astype(np.int32)

@@ -143,7 +143,8 @@ def _prob0e(m: sp.csr_array, row_groups: np.ndarray, goal: np.ndarray, wide: np.
     """A minimum's prob-0 states for ``goal`` and for ``wide`` (``Prob0E``: outside the
     attractor of each; ``two``: the targets differ, so two attractors) and its maybe
     states (in the wide attractor, outside ``wide``); third, the lift's staying strategy
-    on each prob-0 set, read from its attractor's hit choices (:func:`~mitld_lp.solvers.analysis_staying.staying_record`)."""
+    on each prob-0 set, read from its attractor's hit choices
+    (:func:`~mitld_lp.solvers.analysis_staying.staying_record`)."""
     if two:  # each attractor with its hit choices (NumPy's walk reverses the pattern twice)
         positive, hit_wide = attractor_spared(m, row_groups, wide)
         reach_goal, hit_goal = attractor_spared(m, row_groups, goal)
