@@ -97,14 +97,15 @@ def _prob0e(mdp: MDP, target: np.ndarray, post: list[set[int]]) -> set[int]:
 
 
 def _expected(mdp: MDP, zero: set[int], post: list[set[int]]) -> tuple[list[int], list[int]]:
-    """The states of ``zero`` with several choices and each one's first choice whose
-    support stays in ``zero``."""
+    """The states of ``zero`` whose first choice leaves ``zero``, and each one's first
+    choice whose support stays in ``zero``."""
     groups = mdp.row_groups.tolist()
     states, choices = [], []
     for s in sorted(zero):
-        if groups[s + 1] - groups[s] > 1:
+        stay = [c for c in range(groups[s], groups[s + 1]) if post[c] <= zero]
+        if stay and stay[0] != groups[s]:
             states.append(s)
-            choices.append(next(c for c in range(groups[s], groups[s + 1]) if post[c] <= zero))
+            choices.append(stay[0])
     return states, choices
 
 
@@ -122,9 +123,10 @@ def test_first_unhit_against_a_loop() -> None:
         got = first_unhit(groups, zero, hit)
         want_s, want_c = [], []
         for s in range(n):
-            if zero[s] and counts[s] > 1:
+            unhit = [c for c in range(groups[s], groups[s + 1]) if not hit[c]]
+            if zero[s] and unhit and unhit[0] != groups[s]:
                 want_s.append(s)
-                want_c.append(next(c for c in range(groups[s], groups[s + 1]) if not hit[c]))
+                want_c.append(unhit[0])
         assert got.states.tolist() == want_s
         assert got.choices.tolist() == want_c
         assert got.states.dtype == np.int32 and got.choices.dtype == np.int32

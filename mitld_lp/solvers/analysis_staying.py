@@ -9,8 +9,10 @@ whose every successor of positive probability stays among them
 choice with an entry into its set (:func:`~mitld_lp.solvers.graph.attractor_spared`'s
 *hit* choices), and the analysis's matrix stores no zero: a choice of a prob-0 state is
 unhit exactly when its support lies among the prob-0 states.  So the first unhit choice
-is the lift's choice, the same integer, and recording it here spares the lift its search
-through the rows (QVBS csma 4-2: 28,447 such states).  Each state outside the set with a
+is the lift's choice, the same integer.  The record holds only the states whose first
+choice is hit (elsewhere the lift's first choice is the staying one): it spares the lift
+its search through the rows (QVBS csma 4-2: 28,447 states of several choices searched,
+none of which has its first choice hit).  Each state outside the set with a
 choice keeps one unhit (else it would have joined), so the walk below ends.
 """
 
@@ -22,7 +24,7 @@ import numpy as np
 
 from mitld_lp.solvers.result import read_only
 from mitld_lp.solvers.value_one import SureStrategy
-from mitld_lp.util.arrays import SLICE_STATES, index_dtype
+from mitld_lp.util.arrays import index_dtype
 
 __all__ = ["STAYING_STRATEGY", "Staying", "first_unhit", "recorded_staying", "staying_record"]
 
@@ -33,23 +35,25 @@ a quotient reads the one whose set *is* its ``prob0``."""
 
 
 def first_unhit(row_groups: np.ndarray, zero: np.ndarray, hit: np.ndarray) -> SureStrategy:
-    """The states of ``zero`` (``(n,)`` bool) with more than one choice, ascending, and
-    each one's first choice not ``hit`` (``(n_choices,)`` bool), in
+    """The states of ``zero`` (``(n,)`` bool) whose first choice is ``hit``
+    (``(n_choices,)`` bool), ascending, and each one's first choice not hit, in
     :func:`~mitld_lp.util.arrays.index_dtype` of the states' and the choices' counts.
-    Every such state must have an unhit choice (outside an attractor that marked its hit
-    choices): raises otherwise."""
+    Every other state of ``zero`` with a choice has its first unhit: the lift's first
+    choice there is already the staying one (QVBS csma 4-2: all of its 367,456).  Every
+    state of ``zero`` with a choice must have an unhit one (outside an attractor that
+    marked its hit choices): raises otherwise."""
     groups = np.asarray(row_groups)
     n = groups.shape[0] - 1
-    zero = np.asarray(zero, dtype=bool)
-    parts = []  # a slice of states at a time: no int64 array of every state's count
-    for lo in range(0, n, SLICE_STATES):
-        hi = min(lo + SLICE_STATES, n)
-        many = np.flatnonzero(zero[lo:hi] & (groups[lo + 1:hi + 1] - groups[lo:hi] > 1))
-        parts.append(many + lo)
-    states = np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
+    # the states past the last choice have none (their first row would be past the end;
+    # one of none before it reads the next state's, dropped below)
+    k = int(np.searchsorted(groups[:-1], groups[-1], side="left"))
+    states = np.flatnonzero(np.asarray(zero[:k], dtype=bool) & hit[groups[:k]])
     choice = groups[states].astype(np.int64)
     last = groups[states + 1] - 1
-    pending = np.flatnonzero(hit[choice])
+    if np.any(last < choice):  # a state of no choice read its successor's first row
+        keep = last >= choice
+        states, choice, last = states[keep], choice[keep], last[keep]
+    pending = np.arange(states.size)
     while pending.size:  # the states whose candidate is hit: their next choice
         if np.any(choice[pending] >= last[pending]):
             raise ValueError("a state outside the attractor has every choice hit")
