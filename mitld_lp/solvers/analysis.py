@@ -90,12 +90,11 @@ from mitld_lp.solvers.analysis_singles import (
     single_states,
     without_states,
 )
+from mitld_lp.solvers.analysis_staying import STAYING_STRATEGY, staying_record
 from mitld_lp.solvers.graph import (
     EndComponents,
     Sense,
-    attractor,
     attractor_spared,
-    attractors,
     backward_reachable,
     components_reaching,
     state_levels,
@@ -140,15 +139,22 @@ def _sweeps_compiled(m: sp.csr_array, row_groups: np.ndarray, comp: np.ndarray) 
 
 
 def _prob0e(m: sp.csr_array, row_groups: np.ndarray, goal: np.ndarray, wide: np.ndarray,
-            two: bool) -> tuple[list[np.ndarray], np.ndarray]:
+            two: bool) -> tuple[list[np.ndarray], np.ndarray, tuple]:
     """A minimum's prob-0 states for ``goal`` and for ``wide`` (``Prob0E``: outside the
-    attractor of each; ``two``: the targets differ, so two attractors on one reversed
-    pattern) and its maybe states (in the wide attractor, outside ``wide``)."""
-    if two:
-        positive, reach_goal = attractors(m, row_groups, [wide, goal])
-        return [~reach_goal, ~positive], positive & ~wide
-    positive = attractor(m, row_groups, wide)
-    return [~positive & ~goal, ~positive], positive & ~wide
+    attractor of each; ``two``: the targets differ, so two attractors) and its maybe
+    states (in the wide attractor, outside ``wide``); third, the lift's staying strategy
+    on each prob-0 set, read from its attractor's hit choices
+    (:func:`~mitld_lp.solvers.analysis_staying.staying_record`)."""
+    if two:  # each attractor with its hit choices (NumPy's walk reverses the pattern twice)
+        positive, hit_wide = attractor_spared(m, row_groups, wide)
+        reach_goal, hit_goal = attractor_spared(m, row_groups, goal)
+        zero = [~reach_goal, ~positive]
+        return zero, positive & ~wide, staying_record(
+            [(zero[0], hit_goal), (zero[1], hit_wide)], row_groups)
+    positive, hit = attractor_spared(m, row_groups, wide)
+    # the goal lies in the attractor of the wider target: one set for both
+    zero = ~positive
+    return [zero, zero], positive & ~wide, staying_record([(zero, hit)], row_groups)
 
 
 def _no_end_components(n: int, n_choices: int) -> EndComponents:
@@ -281,8 +287,9 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # the load the certificate of this product pays, paid first where its kernels are
     # warm: the walks below run compiled (analysis_gates)
     pay_if_warm(int(m.nnz))
+    staying: tuple = ()  # a minimum's staying strategies (analysis_staying)
     if minimum:
-        attracted = _prob0e(m, mdp.row_groups, goal, wide, extra.any())
+        *attracted, staying = _prob0e(m, mdp.row_groups, goal, wide, extra.any())
     # the product's components and reach; its levels only where the walk gives them
     # free (compiled): else the quotient's own are found below
     # (one compiled pass where warm, a minimum's Prob1A search in it: analysis_reach)
@@ -327,6 +334,9 @@ def analyse(mdp: MDP, goal: np.ndarray, extra: np.ndarray | None = None, *,
     # found on the pattern before the quotient is made (value_one, analysis_singles;
     # else on the quotient below, _without_one cutting them out)
     shared: dict = {}  # the quotients' walks, gathered once (Quotient.shared)
+    if minimum and staying:  # the lift's choices on the prob-0 states (analysis_staying)
+        shared[STAYING_STRATEGY] = staying
+    del staying
     if without_one and not minimum and (not mecs.n_mecs or single_states(mecs)):
         # with end components of one state each (a deadline's self-loops) too: their
         # staying choices hit from the start, the components of value 1 dropped

@@ -21,6 +21,7 @@ import scipy.sparse as sp
 
 from mitld_lp.mdp import MDP, absorbing_states, as_state_mask
 from mitld_lp.solvers.analysis import ATTRACTOR_STRATEGY, SureStrategy, analyse
+from mitld_lp.solvers.analysis_staying import recorded_staying
 from mitld_lp.solvers.graph import (
     EndComponents,
     Sense,
@@ -159,7 +160,10 @@ def _outside(mdp: MDP, quotient: Quotient, policy: np.ndarray) -> None:
     (:func:`_almost_surely`, where the analysis recorded none) is kept there, as the
     states and choices it covers."""
     policy[:] = mdp.row_groups[:-1]
-    if quotient.sense is Sense.MIN and quotient.prob0.any():
+    stay = _staying(quotient)
+    if stay is not None:  # the analysis's record: the same choices, no search
+        policy[stay.states] = stay.choices
+    elif quotient.sense is Sense.MIN and quotient.prob0.any():
         # only the prob-0 states with a second choice are searched: a state's one
         # choice is its first (QVBS csma 4-2: 28,447 of 367,456, where every prob-0
         # state's rows were read, three quarters of its LP stage's CPU)
@@ -177,6 +181,16 @@ def _outside(mdp: MDP, quotient: Quotient, policy: np.ndarray) -> None:
     del played
     policy[quotient.target] = -1
     policy[absorbing_states(mdp)] = -1
+
+
+def _staying(quotient: Quotient) -> SureStrategy | None:
+    """A minimum's staying choices on its prob-0 states of several choices, as the
+    analysis recorded them from the attractor that found those states
+    (:mod:`~mitld_lp.solvers.analysis_staying`: :func:`first_staying`'s integers);
+    None for a maximum or a quotient built otherwise (the lift then searches)."""
+    if quotient.sense is not Sense.MIN:
+        return None
+    return recorded_staying(quotient.shared, quotient.prob0)
 
 
 def _sure_played(mdp: MDP, quotient: Quotient) -> SureStrategy | None:
@@ -293,8 +307,14 @@ def _lifted_compiled(mdp: MDP, quotient: Quotient, chosen: np.ndarray) -> np.nda
 
     ends = absorbing_states(mdp)
     ends |= np.asarray(quotient.target)
+    stay = _staying(quotient)
     policy = lift_states(np.asarray(mdp.row_groups), mdp.matrix, quotient.prob0,
-                         quotient.sense is Sense.MIN, quotient.state_map, chosen, ends)
+                         quotient.sense is Sense.MIN and stay is None, quotient.state_map,
+                         chosen, ends)
+    if stay is not None:  # the analysis's record, where the kernel searched (never an end)
+        keep = (quotient.state_map[stay.states] < 0) & ~ends[stay.states]
+        policy[stay.states[keep]] = stay.choices[keep]
+    del stay
     played = _sure_played(mdp, quotient)
     if played is not None:  # never a target's or an absorbing state's -1 (as _outside)
         keep = ~ends[played.states]
