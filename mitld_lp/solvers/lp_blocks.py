@@ -37,8 +37,8 @@ from mitld_lp.solvers.topological import (
 from mitld_lp.util.progress import tracked
 
 __all__ = ["Answer", "block_lp", "exit_reward", "flow_matrix", "may_be_optimal",
-           "policy_flow", "primal_objective", "sensed", "solve_block", "solve_decomposed",
-           "tightened"]
+           "policy_flow", "primal_objective", "product_states", "sensed", "solve_block",
+           "solve_decomposed", "tightened"]
 
 logger = logging.getLogger(__name__)
 
@@ -445,6 +445,7 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray | Callable[[], np.ndarray],
     worst = Raw(Status.OPTIMAL, "")
     iterations = calls = n_columns = n_kept = n_eliminated = n_greedy = 0
     walks: dict[int, Walked] = {}  # greedy chains, for the flow
+    plain: list[np.ndarray] = []  # the product states of the plain reduced states, once
     todo = q.n_states - int(np.count_nonzero(q.zero))  # the states the levels hold
     # the single states a run of levels at a time (no skip: the flow's walk too)
     # (shared_levels: the iteration's, where it built them for this quotient)
@@ -496,9 +497,13 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray | Callable[[], np.ndarray],
             weights[picked] = 1.0
             n_greedy += greedy.n_settled
             del picked
-            # the certificate's chain there, where the policy ends up the same (whether
-            # the LP solves some of the states or none)
-            offer(greedy.walk)
+            # the certificate's chain there, where the policy ends up the same: told
+            # its product states where the block settles whole (the LP's policy there
+            # is the walk's; the certificate drops it once its states show it cannot
+            # serve), else kept by its levels (:func:`~mitld_lp.solvers.chain_levels.
+            # offer`)
+            offer(greedy.walk, None if greedy.left.size else
+                  product_states(q, rest, plain))
             if greedy.left.size == 0:  # no LP: its flow matrix is never built
                 walks[level.index] = Walked.of(block, greedy.walk)
                 continue
@@ -563,6 +568,24 @@ def solve_decomposed(q: Quotient, b_eq: np.ndarray | Callable[[], np.ndarray],
     return Answer(Raw(worst.status, message, iterations=iterations), y, values,
                    reduced_choice, primal_objective(q, y),
                    float(np.einsum("i,i->", b_eq, values)), calls)
+
+
+def product_states(q: Quotient, states: np.ndarray, plain: list[np.ndarray],
+                   ) -> np.ndarray | None:
+    """The product states of the reduced ``states`` (increasing), increasing; None where
+    one of them is not one product state's (an end component collapsed).  ``plain``:
+    the product states of the plain reduced states (numbered in the product's order,
+    :class:`~mitld_lp.solvers.reduced.Quotient`), found at the first call and kept
+    there."""
+    if states.size == 0 or int(states[-1]) >= q.n_plain:
+        return None
+    if not plain:
+        m = np.asarray(q.state_map)
+        plain.append(np.flatnonzero((m >= 0) & (m < q.n_plain)))
+    got = plain[0][states]
+    ok = (np.array_equal(np.asarray(q.state_map)[got], states)
+          and bool(np.all(got[1:] > got[:-1])))
+    return got if ok else None
 
 
 def primal_objective(q: Quotient, y: np.ndarray | None) -> float:
