@@ -309,8 +309,10 @@ def offer(walk: ChainLevels, states: np.ndarray | None = None) -> None:
     unmatched was 27 bytes a transition more at the certificate's traced peak).  At
     most :data:`OFFER_MAX` are kept; :func:`forget` drops them (the certificate, at
     its end)."""
-    if states is not None:
-        walk.states = np.asarray(states, dtype=np.int64)
+    if states is not None:  # 4 bytes a state where they fit
+        states = np.asarray(states)
+        small = states.size == 0 or int(states[-1]) < np.iinfo(np.int32).max
+        walk.states = states.astype(np.int32 if small else np.int64, copy=False)
     elif walk.blocks is not None and len(walk._cyclic) < OFFER_MIN_LEVELS:
         return
     _OFFERED.append(walk)
