@@ -299,7 +299,8 @@ def offer(walk: ChainLevels, states: np.ndarray | None = None) -> None:
     single states upstream of it (:class:`Extended`).
 
     ``states``: the product states of the walk's rows (increasing), given where the
-    block settles whole (the LP's policy there is the walk's): the certificate then
+    block settles whole (the LP's policy there is the walk's; told once the LP stage's
+    flow is made, whose upstream order is dropped then): the certificate then
     drops the walk as soon as its own solved states show it cannot be asked for
     (:func:`keep_within`), before its chain's walk is made, so the walk is kept
     whatever its levels.  Without them the walk's chain is matched entry for entry
@@ -313,6 +314,7 @@ def offer(walk: ChainLevels, states: np.ndarray | None = None) -> None:
         states = np.asarray(states)
         small = states.size == 0 or int(states[-1]) < np.iinfo(np.int32).max
         walk.states = states.astype(np.int32 if small else np.int64, copy=False)
+        walk._upstream = None  # the flow's order: the certificate solves forward only
     elif walk.blocks is not None and len(walk._cyclic) < OFFER_MIN_LEVELS:
         return
     _OFFERED.append(walk)
