@@ -16,7 +16,7 @@ from mitld_lp.solvers.certify_compiled import (
     compiled_chain_sets,
     compiled_cycling,
 )
-from mitld_lp.solvers.chain_levels import walk_of
+from mitld_lp.solvers.chain_levels import keep_within, walk_of
 from mitld_lp.solvers.graph import Blocks, Reversed, attractor, blocks_from, graph_view, levels
 from mitld_lp.solvers.result import Lifted, read_only
 from mitld_lp.solvers.rounding import Rounding
@@ -141,11 +141,14 @@ def chain(mdp: MDP, target: np.ndarray, policy: np.ndarray, rnd: Rounding,
         idx = np.flatnonzero(solved).astype(index, copy=False)  # 4 bytes a state if it can
         b, sub = _gathered(m, policy, idx, solved, sure, index) if idx.size else (None, None)
     del acting
+    # the LP's offered walks that no chain among the solved states can take, freed
+    # before this chain's own walk is made (:func:`~mitld_lp.solvers.chain_levels.offer`)
+    keep_within(idx)
     v = w = None
     if sub is not None:
         kappa = 1.0 - rnd.low_of[rnd.count[policy[idx]]]
         v, w = _solve(sub, b, kappa, _solved_layers(layers, idx),
-                      None if guess is None else _Gathered(guess, idx))
+                      None if guess is None else _Gathered(guess, idx), idx)
         del sub, b, kappa
     # the solved states' values alone (:attr:`Chain.values` makes every state's)
     values = np.zeros(idx.size)
@@ -272,7 +275,8 @@ def _solved_layers(layers: tuple[np.ndarray, np.ndarray] | None, idx: np.ndarray
 
 def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
            layers: tuple[np.ndarray, np.ndarray] | None,
-           guess: np.ndarray | _Gathered | None = None) -> tuple[np.ndarray, np.ndarray]:
+           guess: np.ndarray | _Gathered | None = None,
+           states: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``v = b + Q v`` and ``W = delta v + Q W`` on a transient chain ``Q`` (``sub``),
     level by level downstream first; ``delta`` per state is twice its relative residual
     plus its rounding bound ``kappa`` (module docs).  ``guess``: an estimate of ``v``
@@ -282,13 +286,15 @@ def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
     state (:func:`one_component`), that component is the only level with a block and
     no state is single: its block is solved directly, the layers' blocks and the
     single states' set-up not made (QVBS zeroconf 1000-4's 164,171 solved states, some
-    7 ms); the same operations on the same operands, so the same bits."""
+    7 ms); the same operations on the same operands, so the same bits.  ``states``:
+    the product states of ``sub``'s rows (increasing), for the LP's offered walks
+    (:func:`~mitld_lp.solvers.chain_levels.walk_of`)."""
     from mitld_lp.solvers.graph import graph_blocks
 
     k = b.shape[0]
     v, w = np.zeros(k), np.zeros(k)
     if layers is not None and one_component(layers[0]):
-        _block(sub, b, kappa, np.arange(k), guess, v, w)
+        _block(sub, b, kappa, np.arange(k), guess, v, w, states)
         return v, w
     diag = sub.diagonal()
     # the layers' blocks by one compiled call where paid: the same arrays as NumPy's
@@ -303,7 +309,7 @@ def _solve(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray,
         singles.solve(done, index + 1, b, kappa, diag, v, w)
         done = index + 1
         inner = blk.states_at(index)
-        _block(sub, b, kappa, inner[~blk.single(inner)], guess, v, w)
+        _block(sub, b, kappa, inner[~blk.single(inner)], guess, v, w, states)
     singles.solve(done, blk.n_levels, b, kappa, diag, v, w)
     return v, w
 
@@ -315,9 +321,11 @@ def one_component(comp: np.ndarray) -> bool:
 
 
 def _block(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray, inner: np.ndarray,
-           guess: np.ndarray | _Gathered | None, v: np.ndarray, w: np.ndarray) -> None:
+           guess: np.ndarray | _Gathered | None, v: np.ndarray, w: np.ndarray,
+           states: np.ndarray | None = None) -> None:
     """``v`` and ``w`` (:func:`_solve`) of the ``inner`` states (increasing): the
-    non-single states of one level, every state below it solved."""
+    non-single states of one level, every state below it solved (``states``: the
+    product states of ``sub``'s rows, or None)."""
     k = b.shape[0]
     if (inner.size == k and sub.has_canonical_format
             and bool(np.all(inner[1:] > inner[:-1]))):
@@ -330,7 +338,9 @@ def _block(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray, inner: np.ndarra
         # every state
         rows = block = sub
         inner = slice(None)
+        mine = states
     else:
+        mine = None if states is None else states[inner]
         rows = sp.csr_array(sub[inner])
         block = sp.csr_array(rows[:, inner])
     known = b[inner] + rows @ v
@@ -340,10 +350,12 @@ def _block(sub: sp.csr_array, b: np.ndarray, kappa: np.ndarray, inner: np.ndarra
     joint = None
     # the chain's own components: one walk, both solves.  The greedy block's walk
     # (solve stage) where it is this chain entry for entry (:func:`~mitld_lp.
-    # solvers.chain_levels.walk_of`: bus_scaled n128 d3, both blocks), not on QVBS
-    # zeroconf 20-4-false, where the chain here is the policy's transient states
-    # only (168,388 of the block's 213,268 states)
-    walk = walk_of(block)
+    # solvers.chain_levels.walk_of`: bus_scaled n128 d3, both blocks; QVBS zeroconf
+    # 1000-6-false min) or this chain less single states upstream of it (zeroconf
+    # 1000-4-false max: 420 of 164,171), not on QVBS zeroconf 20-4-false, where the
+    # chain here is the policy's transient states only (168,388 of the block's
+    # 213,268 states)
+    walk = walk_of(block, mine)
     if g is not None:
         pair = walk.solve(np.column_stack([known, 2.0 * kappa[inner] * g + rows @ w]))
         v[inner], joint = pair[:, 0], pair[:, 1]

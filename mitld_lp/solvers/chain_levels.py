@@ -38,7 +38,8 @@ from mitld_lp.solvers.topological import DenseLU, chain_lu, level_kernels
 if TYPE_CHECKING:
     from scipy.sparse.linalg import SuperLU
 
-__all__ = ["WALK_MIN_STATES", "ChainLevels", "chain_solve", "forget", "offer", "walk_of"]
+__all__ = ["WALK_MIN_STATES", "ChainLevels", "Extended", "chain_solve", "forget", "keep_within",
+           "offer", "walk_of"]
 
 
 WALK_MIN_STATES = 32_768
@@ -57,7 +58,7 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
 (:func:`~mitld_lp.solvers.topological.chain_lu`: dense when small)."""
 
     __slots__ = ("chain", "self_loop", "blocks", "_cyclic", "_kernels", "_singles",
-                 "_upstream")
+                 "_upstream", "states")
 
     def same_chain(self, other: sp.csr_array) -> bool:
         """Whether ``other`` (CSR) has this walk's chain entry for entry (its rows'
@@ -84,6 +85,9 @@ fewer than :data:`WALK_MIN_STATES` states is one LU
                          level_kernels(self.chain.nnz, self.blocks.n_levels))
         self._singles: tuple[np.ndarray, np.ndarray, list[int]] | None = None
         self._upstream: np.ndarray | None = None  # made at the first transposed solve
+        # the states the chain's rows are, in a numbering the certificate shares (the
+        # product's, increasing), where :func:`offer` was told them
+        self.states: np.ndarray | None = None
 
     def _factor(self, level: int, states: np.ndarray) -> tuple[sp.csr_array,
                                                               SuperLU | DenseLU]:
@@ -277,25 +281,41 @@ OFFER_MAX = 4
 
 OFFER_MIN_LEVELS = 16
 """The fewest factorised levels of a walk over its components that :func:`offer`
-keeps (a chain of one LU, below :data:`WALK_MIN_STATES` states, is always kept)."""
+keeps when it is not told the walk's states (a chain of one LU, below
+:data:`WALK_MIN_STATES` states, is always kept)."""
 
 _OFFERED: list[ChainLevels] = []
 
 
-def offer(walk: ChainLevels) -> None:
+def offer(walk: ChainLevels, states: np.ndarray | None = None) -> None:
     """Keep ``walk`` (its components and factorisations) for a later chain equal to its
-    own (:func:`walk_of`).  The LP stage offers the walk of each block its greedy policy
-    settles whole (:func:`mitld_lp.solvers.lp_blocks.solve_decomposed`): the
-    certificate's chain on that block is the same policy's chain, entry for entry, on
-    ``bus_scaled`` n128 d3 both blocks' (32,768 states over 120 levels with cyclic
-    components, and 16,384 states), which it used to factorise a second time.  At most
-    :data:`OFFER_MAX` are kept; :func:`forget` drops them (the certificate, at its
-    end).  A walk over its components that factorised fewer than
-    :data:`OFFER_MIN_LEVELS` levels is not kept: holding it costs more than it saves
-    (QVBS ``zeroconf`` 1000-4-false: the greedy chain's 213,268 states, two cyclic
-    levels, and the certificate's chain another graph: held, it was 27 bytes a
-    transition more at the certificate's traced peak)."""
-    if walk.blocks is not None and len(walk._cyclic) < OFFER_MIN_LEVELS:
+    own, or extending it (:func:`walk_of`).  The LP stage offers the walk of each block
+    its greedy policy settles (:func:`mitld_lp.solvers.lp_blocks.solve_decomposed`):
+    the certificate's chain on that block is the same policy's chain, entry for entry,
+    on ``bus_scaled`` n128 d3 both blocks' (32,768 states over 120 levels with cyclic
+    components, and 16,384 states), and on QVBS ``zeroconf`` 1000-6-false min (550,097
+    states, one cyclic level), which it used to factorise a second time; on
+    ``zeroconf`` 1000-4-false max the certificate's chain is the greedy one with 420
+    single states upstream of it (:class:`Extended`).
+
+    ``states``: the product states of the walk's rows (increasing), given where the
+    block settles whole (the LP's policy there is the walk's; told once the LP stage's
+    flow is made, whose upstream order is dropped then): the certificate then
+    drops the walk as soon as its own solved states show it cannot be asked for
+    (:func:`keep_within`), before its chain's walk is made, so the walk is kept
+    whatever its levels.  Without them the walk's chain is matched entry for entry
+    alone, and a walk over its components that factorised fewer than
+    :data:`OFFER_MIN_LEVELS` levels is not kept: holding it through the certificate
+    costs more than it saves (QVBS ``zeroconf`` 1000-4-false's greedy chain held
+    unmatched was 27 bytes a transition more at the certificate's traced peak).  At
+    most :data:`OFFER_MAX` are kept; :func:`forget` drops them (the certificate, at
+    its end)."""
+    if states is not None:  # 4 bytes a state where they fit
+        states = np.asarray(states)
+        small = states.size == 0 or int(states[-1]) < np.iinfo(np.int32).max
+        walk.states = states.astype(np.int32 if small else np.int64, copy=False)
+        walk._upstream = None  # the flow's order: the certificate solves forward only
+    elif walk.blocks is not None and len(walk._cyclic) < OFFER_MIN_LEVELS:
         return
     _OFFERED.append(walk)
     del _OFFERED[:-OFFER_MAX]
@@ -304,6 +324,92 @@ def offer(walk: ChainLevels) -> None:
 def forget() -> None:
     """Drop every walk :func:`offer` kept (their factorisations freed)."""
     _OFFERED.clear()
+
+
+def keep_within(states: np.ndarray) -> None:
+    """Drop the offered walks told their states (:func:`offer`) that are not all among
+    ``states`` (increasing): the certificate's solved states, every chain it walks
+    among them, so no such walk can serve it (freed before its own walk is made)."""
+    _OFFERED[:] = [w for w in _OFFERED if w.states is None or _within(w.states, states)]
+
+
+def _within(inner: np.ndarray, outer: np.ndarray) -> bool:
+    """Whether every one of ``inner`` is in ``outer`` (both increasing)."""
+    if inner.size > outer.size:
+        return False
+    if inner.size == 0:
+        return True
+    at = np.minimum(np.searchsorted(outer, inner), outer.size - 1)
+    return bool(np.array_equal(outer[at], inner))
+
+
+class Extended:
+    """The walk of a chain ``c`` that extends an offered walk's chain (:func:`offer`) by
+    single states upstream of it: ``c``'s rows at ``inside`` (increasing) are the walk's
+    rows entry for entry, their columns mapped to ``inside`` (so nothing of the walk
+    leads out of it), and the other states, ``order`` (downstream first), form no cycle
+    but their self-loops.  A new walk of ``c`` finds the walk's components at the same
+    levels (a level counts down from the sinks, and nothing below changed), the same
+    cyclic states in each in the same order (the same LUs), and each single state's
+    value from its row and the final values below it: the same sums in the same order.
+    So :meth:`solve` gives a new walk's bits: the offered walk's solve on ``inside``,
+    then the other states by the same single-state formula, in one compiled call (or a
+    level of them at a time by NumPy, the same bits)."""
+
+    __slots__ = ("walk", "chain", "inside", "order", "starts", "self_loop")
+
+    def __init__(self, walk: ChainLevels, chain: sp.csr_array, inside: np.ndarray,
+                 order: np.ndarray, starts: np.ndarray) -> None:
+        self.walk, self.chain, self.inside = walk, chain, inside
+        self.order, self.starts = order, starts
+        self.self_loop = chain.diagonal()
+
+    @staticmethod
+    def of(walk: ChainLevels, c: sp.csr_array, states: np.ndarray) -> Extended | None:
+        """``c`` (canonical, its rows the product states ``states``, increasing) as an
+        extension of ``walk`` (told its states), or None where it is not one (the
+        class docs)."""
+        mine = walk.states
+        g = walk.chain
+        n = c.shape[0]
+        if (mine is None or walk.blocks is None or mine.size >= n
+                or not _within(mine, states)):
+            return None
+        inside = np.searchsorted(states, mine)
+        if not np.array_equal(np.diff(c.indptr)[inside], np.diff(g.indptr)):
+            return None
+        cols, vals = row_columns(c, inside)
+        if not (np.array_equal(vals, g.data) and np.array_equal(cols, inside[g.indices])):
+            return None
+        del cols, vals
+        above = np.ones(n, dtype=bool)
+        above[inside] = False
+        upper = np.flatnonzero(above)
+        del above
+        among = sp.csr_array(sp.csr_array(c[upper])[:, upper])
+        blk = graph_blocks(_support(among), among.diagonal())
+        if bool(np.any(blk.size > 1)):  # a cycle among them: a new walk's own LUs
+            return None
+        return Extended(walk, c, inside, upper[blk.by_level], blk.level_starts)
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """``x = rhs + Q x`` in float64 (``rhs``: a vector, or a column per right-hand
+        side), with a new walk's bits (the class docs)."""
+        rhs = np.asarray(rhs, dtype=np.float64)
+        x = np.zeros(rhs.shape)
+        x[self.inside] = self.walk.solve(rhs[self.inside])
+        c, kern = self.chain, self.walk._kernels
+        if kern is not None:
+            n = rhs.shape[0]
+            out = x.reshape(n, -1)  # a view: x is contiguous
+            kern.chain_solve(self.order, c.indptr, c.indices, c.data, self.self_loop,
+                             np.ascontiguousarray(rhs.reshape(n, -1)), out)
+            return x
+        loop = self.self_loop if rhs.ndim == 1 else self.self_loop[:, None]
+        for a, z in zip(self.starts[:-1].tolist(), self.starts[1:].tolist(), strict=True):
+            one = self.order[a:z]
+            x[one] = (rhs[one] + rows_dot(c, one, x)) / (1.0 - loop[one])
+        return x
 
 
 def _support(c: sp.csr_array) -> sp.csr_array:
@@ -326,15 +432,25 @@ def _walked(c: sp.csr_array) -> sp.csr_array:
     return c
 
 
-def walk_of(chain: sp.csr_array | sp.csc_array) -> ChainLevels:
+def walk_of(chain: sp.csr_array | sp.csc_array,
+            states: np.ndarray | None = None) -> ChainLevels | Extended:
     """The walk of ``chain``: an offered one whose chain is ``chain`` entry for entry as
     :class:`ChainLevels` would keep it (:meth:`ChainLevels.same_chain`; taken out of
     the offers), its components and factorisations those of ``chain`` itself, so every
-    solve on it has the bits of a new walk's; else a new :class:`ChainLevels`."""
+    solve on it has the bits of a new walk's; else, where ``states`` (the product states
+    of ``chain``'s rows, increasing) are given, an offered walk that ``chain`` extends
+    by single states upstream (:class:`Extended`: a new walk's bits too); else a new
+    :class:`ChainLevels`."""
     c = _walked(sp.csr_array(chain))
     for k, walk in enumerate(_OFFERED):
         if walk.same_chain(c):
             return _OFFERED.pop(k)
+    if states is not None and c.shape[0] >= WALK_MIN_STATES:
+        for k, walk in enumerate(_OFFERED):
+            got = Extended.of(walk, c, np.asarray(states))
+            if got is not None:
+                del _OFFERED[k]
+                return got
     return ChainLevels(c)
 
 
