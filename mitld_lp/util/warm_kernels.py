@@ -170,6 +170,7 @@ SIGNATURES: dict[str, dict[str, tuple[str, ...]]] = {
         ),
         "chain_solve": (
             "i8/1C i4/1C i4/1C f8/1C f8/1C/ro f8/2C f8/2C",
+            "i8/1C i4/1C i4/1C f8/1C f8/1C f8/2C f8/2C",  # cert-86b's Extended: its own leave
         ),
         "chain_values": (
             "i8/1C i4/1C i4/1C f8/1C f8/1C/ro f8/1C f8/1C f8/1C f8/1C",
